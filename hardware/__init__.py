@@ -1,0 +1,1 @@
+"""Hardware package: filled by later issues (see docs/ and ../shared/DESIGN.md)."""

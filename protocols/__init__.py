@@ -1,0 +1,1 @@
+"""Protocols package: filled by later issues (see docs/ and ../shared/DESIGN.md)."""
