@@ -1,0 +1,121 @@
+"""Summaries of a tactile-flow field over the sensor footprint, per frame and per time window.
+
+Image components are (col, row) as in :mod:`tactile.flow`. Because a view's axes satisfy
+cols × rows = look, a positive ``curl`` is a rotation counter-clockwise about the view's
+``look`` axis (right-hand rule), and a positive ``divergence`` is a pattern spreading out
+(pressing in) while a negative one is a pattern contracting (releasing).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from ._checks import finite_array
+
+
+@dataclass(frozen=True)
+class FlowAggregates:
+    """Per-frame summaries of one view's flow. All arrays have length T.
+
+    Attributes:
+        mean: (T, 2) mean flow vector over the footprint (flow units, e.g. px/frame).
+        magnitude: (T,) |mean|.
+        direction: (T,) angle of ``mean`` in the image, rad, atan2(row, col).
+        divergence: (T,) mean ∂u/∂col + ∂v/∂row over the footprint interior (1/frame for px/frame).
+        curl: (T,) mean ∂v/∂col − ∂u/∂row over the footprint interior (same units).
+        confidence: (T,) fraction of footprint pixels whose flow exceeds the noise level.
+    """
+
+    mean: np.ndarray
+    magnitude: np.ndarray
+    direction: np.ndarray
+    divergence: np.ndarray
+    curl: np.ndarray
+    confidence: np.ndarray
+
+
+def aggregate_flow(flow, mask, noise: float = 0.05) -> FlowAggregates:
+    """Summarise a flow field (T, H, W, 2) over the footprint ``mask`` (H, W) bool.
+
+    ``noise``: magnitude (flow units) below which a pixel counts as not moving, for
+    ``confidence``. Divergence and curl are means of central differences over the mask
+    eroded by one pixel, so the footprint's edge (where flow meets the zero background)
+    does not leak into them. Mean flow, divergence and curl are linear in the field, so all
+    four are one matrix product with the weights of :func:`flow_functionals`.
+    """
+    flow = np.asarray(flow, dtype=np.float32)
+    mask = np.asarray(mask, dtype=bool)
+    if flow.ndim != 4 or flow.shape[-1] != 2 or flow.shape[1:3] != mask.shape:
+        raise ValueError(f"flow: expected (T, H, W, 2) matching mask {mask.shape}, got {flow.shape}")
+    if not mask.any():
+        raise ValueError("mask: expected a footprint with at least one pixel, got an empty mask")
+    n = len(flow)
+    sums = flow.reshape(n, -1) @ flow_functionals(mask).astype(np.float32)    # (T, 4)
+    mean, divergence, curl = sums[:, :2].astype(np.float64), sums[:, 2], sums[:, 3]
+    flat = flow.reshape(n, -1, 2)
+    moving = (np.einsum("tpk,tpk->tp", flat, flat) > np.float32(noise) ** 2)[:, mask.ravel()]
+    return FlowAggregates(mean=mean, magnitude=np.hypot(mean[:, 0], mean[:, 1]),
+                          direction=np.arctan2(mean[:, 1], mean[:, 0]),
+                          divergence=divergence.astype(np.float64), curl=curl.astype(np.float64),
+                          confidence=moving.mean(axis=1))
+
+
+def flow_functionals(mask) -> np.ndarray:
+    """Weights (H·W·2, 4) such that ``flow.reshape(T, -1) @ weights`` gives, per frame, the
+    mean (col, row) flow over ``mask`` and the mean divergence and curl over its interior.
+
+    Central difference ∂f/∂c at p is (f[p+c] − f[p−c])/2; summed over the interior that is
+    Σ_q f[q]·(I[q−c] − I[q+c])/2 with I the interior indicator. The interior (mask eroded,
+    border excluded) never touches the array edge, so no one-sided differences arise.
+    """
+    mask = np.asarray(mask, dtype=bool)
+    interior = ndimage.binary_erosion(mask, border_value=0)
+    if not interior.any():
+        interior = np.zeros_like(mask)
+        interior[1:-1, 1:-1] = mask[1:-1, 1:-1]
+    ind = np.pad(interior.astype(np.float64), 1) / (2.0 * max(interior.sum(), 1))
+    d_col = ind[1:-1, :-2] - ind[1:-1, 2:]              # weight of f[q] in Σ ∂f/∂col
+    d_row = ind[:-2, 1:-1] - ind[2:, 1:-1]              # weight of f[q] in Σ ∂f/∂row
+    h, w = mask.shape
+    weights = np.zeros((h, w, 2, 4))
+    weights[..., 0, 0] = mask / mask.sum()
+    weights[..., 1, 1] = mask / mask.sum()
+    weights[..., 0, 2], weights[..., 1, 2] = d_col, d_row        # divergence = ∂u/∂c + ∂v/∂r
+    weights[..., 1, 3], weights[..., 0, 3] = d_col, -d_row       # curl = ∂v/∂c − ∂u/∂r
+    return weights.reshape(h * w * 2, 4)
+
+
+def window(agg: FlowAggregates, start: int, stop: int) -> dict[str, float]:
+    """Summary of frames [start, stop): mean vector, its direction and magnitude, mean curl,
+    divergence and confidence. Empty windows are a ``ValueError``."""
+    if not 0 <= start < stop <= len(agg.magnitude):
+        raise ValueError(f"window: expected 0 ≤ start < stop ≤ {len(agg.magnitude)}, got [{start}, {stop})")
+    mean = agg.mean[start:stop].mean(axis=0)
+    return {"mean_col": float(mean[0]), "mean_row": float(mean[1]),
+            "magnitude": float(np.hypot(*mean)), "direction": float(np.arctan2(mean[1], mean[0])),
+            "curl": float(agg.curl[start:stop].mean()),
+            "divergence": float(agg.divergence[start:stop].mean()),
+            "confidence": float(agg.confidence[start:stop].mean())}
+
+
+def centre_of_pressure(activation, taxels) -> tuple[np.ndarray, np.ndarray]:
+    """Activation-weighted taxel position and total activation.
+
+    Args:
+        activation: (..., 24) activation (kΩ, positive under pressure).
+        taxels: (24, 3) taxel positions, mm.
+
+    Returns:
+        ``(cop, total)``: (..., 3) centre of pressure in mm, weighted by the positive part of
+        the activation (NaN where nothing is pressed), and (...,) total activation (kΩ).
+    """
+    activation = finite_array("activation", activation, last=24)
+    taxels = finite_array("taxels", taxels, ndim=2, last=3)
+    load = np.clip(activation, 0.0, None)
+    weight = load.sum(axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cop = np.where(weight > 0, (load @ taxels) / weight, np.nan)
+    return cop, activation.sum(axis=-1)

@@ -1,0 +1,149 @@
+"""Tactile flow: dense optical flow between tactile frames.
+
+Two forms (both (T, H, W, 2) float32 arrays of (Δcol, Δrow) per pixel, pixels):
+
+- *dynamic* flow, frame t−1 → t (the method's tactile flow while sliding), in pixels/frame;
+  ``flow[0]`` is zero (there is no earlier frame);
+- *static* flow, a reference frame → frame t: how far the pressure pattern has drifted
+  while the contact itself stays put (the static-friction phase of a pour), in pixels.
+
+Methods: Farnebäck (the method's choice, OpenCV), DIS and Dual TV-L1 (opencv-contrib).
+:func:`to_mm_per_s` and :func:`to_mm` convert to physical units on the view plane.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+METHODS = ("farneback", "dis", "tvl1")
+
+
+@dataclass(frozen=True)
+class FlowConfig:
+    """Dense flow method and its parameters (names as OpenCV's).
+
+    ``farneback``: pyr_scale, levels, winsize, iterations, poly_n, poly_sigma, flags.
+    ``dis``: preset (0 ultrafast, 1 fast, 2 medium), plus optional overrides in ``dis``.
+    ``tvl1``: keyword arguments of ``cv2.optflow.DualTVL1OpticalFlow_create``.
+    """
+
+    method: str = "farneback"
+    pyr_scale: float = 0.5
+    levels: int = 3
+    winsize: int = 15
+    iterations: int = 3
+    poly_n: int = 5
+    poly_sigma: float = 1.2
+    flags: int = 0
+    dis_preset: int = 2
+    dis: dict = field(default_factory=dict)
+    tvl1: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.method not in METHODS:
+            raise ValueError(f"flow.method: expected one of {', '.join(METHODS)}, got {self.method!r}")
+        if not 0 < self.pyr_scale < 1:
+            raise ValueError(f"flow.pyr_scale: expected a value in (0, 1), got {self.pyr_scale!r}")
+        for name in ("levels", "winsize", "iterations", "poly_n"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"flow.{name}: expected an integer ≥ 1, got {getattr(self, name)!r}")
+
+
+class FlowEstimator:
+    """Computes the dense flow between two 8-bit frames with one configured method.
+
+    OpenCV's DIS and TV-L1 objects are created once and reused (they are costly to build).
+    """
+
+    def __init__(self, config: FlowConfig = FlowConfig()):
+        self.config = config
+        self._algo = None
+        if config.method == "dis":
+            self._algo = cv2.DISOpticalFlow_create(config.dis_preset)
+            for key, value in config.dis.items():
+                getattr(self._algo, "set" + key[0].upper() + key[1:])(value)
+        elif config.method == "tvl1":
+            self._algo = cv2.optflow.DualTVL1OpticalFlow_create(**config.tvl1)
+
+    def __call__(self, prev: np.ndarray, nxt: np.ndarray) -> np.ndarray:
+        """Flow (H, W, 2) float32 in pixels that carries ``prev`` (H, W uint8) onto ``nxt``."""
+        c = self.config
+        if self._algo is None:
+            return cv2.calcOpticalFlowFarneback(prev, nxt, None, c.pyr_scale, c.levels, c.winsize,
+                                                c.iterations, c.poly_n, c.poly_sigma, c.flags)
+        return self._algo.calc(prev, nxt, None)
+
+
+def _check_frames(frames) -> np.ndarray:
+    frames = np.asarray(frames)
+    if frames.ndim != 3 or frames.dtype != np.uint8:
+        raise ValueError(f"frames: expected a (T, H, W) uint8 array (see frames.to_uint8), "
+                         f"got shape {frames.shape} dtype {frames.dtype}")
+    if len(frames) == 0:
+        raise ValueError("frames: expected at least one frame, got 0")
+    return frames
+
+
+def dynamic_flow(frames, config: FlowConfig = FlowConfig()) -> np.ndarray:
+    """Flow between consecutive frames: (T, H, W) uint8 → (T, H, W, 2) px/frame, flow[0] = 0."""
+    frames = _check_frames(frames)
+    estimate = FlowEstimator(config)
+    out = np.zeros(frames.shape + (2,), np.float32)
+    for t in range(1, len(frames)):
+        out[t] = estimate(frames[t - 1], frames[t])
+    return out
+
+
+def static_flow(frames, reference, config: FlowConfig = FlowConfig()) -> np.ndarray:
+    """Flow from a reference frame to every frame: → (T, H, W, 2) px.
+
+    ``reference``: an index into ``frames`` or an (H, W) uint8 frame (e.g. the unloaded one).
+    """
+    frames = _check_frames(frames)
+    if np.ndim(reference) == 0:
+        index = int(reference)
+        if not -len(frames) <= index < len(frames):
+            raise ValueError(f"reference: expected a frame index in [0, {len(frames)}), got {reference!r}")
+        ref = frames[index]
+    else:
+        ref = np.asarray(reference)
+        if ref.shape != frames.shape[1:] or ref.dtype != np.uint8:
+            raise ValueError(f"reference: expected an index or a {frames.shape[1:]} uint8 frame, "
+                             f"got shape {ref.shape} dtype {ref.dtype}")
+    estimate = FlowEstimator(config)
+    return np.stack([estimate(ref, f) for f in frames])
+
+
+def contact_reference(total_activation, threshold: float, settle: int = 10) -> int:
+    """Index of the frame at which the contact became established.
+
+    The first sample from which ``total_activation`` (T,) stays above ``threshold`` for
+    ``settle`` consecutive samples; ``ValueError`` if the contact never settles.
+    """
+    total = np.asarray(total_activation, dtype=np.float64)
+    if total.ndim != 1:
+        raise ValueError(f"total_activation: expected a 1-D series, got shape {total.shape}")
+    settle = int(settle)
+    if settle < 1:
+        raise ValueError(f"settle: expected an integer ≥ 1, got {settle}")
+    above = total > threshold
+    if len(above) >= settle:
+        run = np.convolve(above.astype(np.int64), np.ones(settle, np.int64), "valid")
+        hits = np.flatnonzero(run == settle)
+        if hits.size:
+            return int(hits[0])
+    raise ValueError(f"total_activation: never stays above threshold={threshold} for {settle} "
+                     f"samples; no contact to take as the static-flow reference")
+
+
+def to_mm_per_s(flow_px, mm_per_px: float, rate_hz: float) -> np.ndarray:
+    """Dynamic flow px/frame → mm/s on the view plane."""
+    return np.asarray(flow_px) * np.float32(mm_per_px * rate_hz)
+
+
+def to_mm(flow_px, mm_per_px: float) -> np.ndarray:
+    """Static flow px → mm on the view plane."""
+    return np.asarray(flow_px) * np.float32(mm_per_px)

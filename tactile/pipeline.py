@@ -1,0 +1,194 @@
+"""The whole method for a record: counts → activation → smoothed → frames → flow → aggregates.
+
+:class:`TactileConfig` holds every parameter (the ``analysis`` config group maps onto it);
+:class:`TactileModel` holds what is computed once per geometry and configuration (the
+ellipsoid fit, the mesh, the kernel weights, one :class:`~tactile.frames.FramePlan` per
+view) so that processing a record is matrix products, a compiled rasteriser and the flow.
+
+Records are processed in chunks of frames so memory stays bounded for long runs: frames are
+kept (uint8, 1 kB per 32×32 frame), flow fields only on request.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import aggregate, flow, frames, geometry, signals, surface
+from ._checks import finite_array
+
+
+@dataclass(frozen=True)
+class TactileConfig:
+    """Parameters of the method. Units in brackets.
+
+    Attributes:
+        kalman_r, kalman_q: observation and process noise variances of the Kalman filter
+            (kΩ²); ``smooth`` runs the RTS smoother after it (offline), else filter only.
+        sigma: kernel width σ [mm]. With the method's kernel exp(−d/(2σ²)) the weight falls
+            by e over a geodesic distance of 2σ², i.e. 2 mm for σ = 1 mm: about half the
+            spacing of neighbouring taxels, so each taxel's influence is local.
+        kernel: ``"paper"`` exp(−d/(2σ²)) or ``"squared"`` exp(−d²/(2σ²)).
+        geodesic: ``"accurate"`` or ``"paper"`` (see :mod:`tactile.geometry`).
+        mesh_spacing: distance between surface-mesh vertices [mm]; about the pixel size, so
+            each pixel is covered by one or two triangles.
+        scale: displacement of the tactile surface along its normals [mm per kΩ].
+        render: ``"exact"`` rasterises the displaced surface with a z-buffer every frame
+            (the method); ``"linear"`` renders the undisplaced surface with one precomputed
+            matrix product per frame, identical when ``scale = 0`` and ~4× faster, but it
+            ignores how the displacement moves silhouettes (mean difference ≈ 0.05 kΩ per
+            pixel at the defaults; measure with ``benchmarks/bench_pipeline.py``).
+        views: names of the views to render (keys of ``custom_views`` or of
+            :data:`tactile.frames.DEFAULT_VIEWS`).
+        custom_views: extra views defined in config.
+        size: frame size (H, W) [px].
+        intensity_range: activation mapped to 0 and 255 [kΩ].
+        flow: the dense-flow method and its parameters.
+        noise: flow magnitude below which a pixel counts as still [px/frame].
+        chunk: frames processed at a time.
+    """
+
+    kalman_r: float = 0.005
+    kalman_q: float = 0.00015
+    smooth: bool = True
+    sigma: float = 1.0
+    kernel: str = "paper"
+    geodesic: str = "accurate"
+    mesh_spacing: float = 0.9
+    scale: float = 0.25
+    render: str = "exact"
+    views: tuple[str, ...] = ("bottom", "left", "right")
+    custom_views: dict[str, frames.View] = field(default_factory=dict)
+    size: tuple[int, int] = (28, 40)
+    intensity_range: tuple[float, float] = (0.0, 8.0)
+    flow: flow.FlowConfig = field(default_factory=flow.FlowConfig)
+    noise: float = 0.05
+    chunk: int = 256
+
+
+@dataclass(frozen=True)
+class TactileModel:
+    """Precomputed geometry for one configuration: build once with :meth:`build`."""
+
+    config: TactileConfig
+    taxels: np.ndarray                       # (24, 3) mm, sensor frame
+    fit: geometry.EllipsoidFit
+    mesh: surface.SurfaceMesh
+    weights: np.ndarray                      # (M, 24) Nadaraya–Watson weights
+    plans: dict[str, frames.FramePlan]
+    operators: dict[str, np.ndarray]         # view → (H·W, 24) frame of the undisplaced surface
+
+    @classmethod
+    def build(cls, config: TactileConfig = TactileConfig(), taxels=None, cache_dir=None) -> "TactileModel":
+        """Fit the ellipsoid, mesh it, compute (or load cached) geodesic kernel weights and plans."""
+        if config.render not in ("exact", "linear"):
+            raise ValueError(f"render: expected 'exact' or 'linear', got {config.render!r}")
+        taxels = geometry.load_taxels() if taxels is None else finite_array("taxels", taxels, ndim=2, last=3)
+        if len(taxels) != 24:
+            raise ValueError(f"taxels: expected 24 taxel positions, got {len(taxels)}")
+        fit = geometry.fit_ellipsoid(taxels)
+        mesh = surface.build_mesh(fit.centre, fit.axes, spacing=config.mesh_spacing)
+        weights = surface.interpolation_weights(mesh, taxels, sigma=config.sigma, kernel=config.kernel,
+                                                geodesic=config.geodesic, cache_dir=cache_dir)
+        known = {**frames.DEFAULT_VIEWS, **config.custom_views}
+        unknown = [v for v in config.views if v not in known]
+        if unknown:
+            raise ValueError(f"views: unknown view(s) {unknown}; expected names from {sorted(known)}")
+        margin = max(config.scale * config.intensity_range[1], 0.0) + 0.5
+        plans = {name: frames.make_plan(mesh, known[name], size=config.size, margin=margin)
+                 for name in config.views}
+        operators = {name: (frames.linear_operator(plan, mesh) @ weights).astype(np.float32)
+                     for name, plan in plans.items()}
+        return cls(config=config, taxels=taxels, fit=fit, mesh=mesh, weights=weights, plans=plans,
+                   operators=operators)
+
+    def smooth(self, activation) -> np.ndarray:
+        """Kalman (+ RTS if ``config.smooth``) along axis 0 of (T, ..., 24) activation, kΩ."""
+        c = self.config
+        run = signals.kalman_smooth if c.smooth else signals.kalman_filter
+        return run(activation, R=c.kalman_r, Q=c.kalman_q)
+
+    def render(self, activation, view: str) -> np.ndarray:
+        """Activation frames (T, H, W) float32 [kΩ] of one view for (T, 24) activation."""
+        plan = self.plans[view]
+        if self.config.render == "linear":
+            act = finite_array("activation", activation, ndim=2, last=24).astype(np.float32)
+            return (act @ self.operators[view].T).reshape((len(act),) + plan.shape)
+        values = surface.interpolate(activation, self.weights)
+        return frames.render(plan, self.mesh, values, self.config.scale)
+
+    def to_uint8(self, frames_kohm) -> np.ndarray:
+        low, high = self.config.intensity_range
+        return frames.to_uint8(frames_kohm, low, high)
+
+
+@dataclass
+class ViewResult:
+    """Flow of one finger in one view.
+
+    Attributes:
+        frames: (T, H, W) uint8 tactile frames.
+        dynamic: aggregates of the dynamic flow, px/frame (``dynamic.mean[0]`` is zero).
+        static: aggregates of the static flow from ``reference``, px, or ``None``.
+        reference: index of the static-flow reference frame, or ``None``.
+        dynamic_field, static_field: (T, H, W, 2) float32 flow fields if requested.
+    """
+
+    frames: np.ndarray
+    dynamic: aggregate.FlowAggregates
+    static: aggregate.FlowAggregates | None
+    reference: int | None
+    dynamic_field: np.ndarray | None = None
+    static_field: np.ndarray | None = None
+
+
+def process_view(model: TactileModel, activation, view: str, reference: int | None = None,
+                 keep_fields: bool = False, progress=None) -> ViewResult:
+    """Frames, dynamic and static flow, and their aggregates for one finger and one view.
+
+    Args:
+        model: the precomputed model.
+        activation: (T, 24) smoothed activation of one finger, kΩ.
+        view: a name in ``model.plans``.
+        reference: frame index for the static flow (see :func:`tactile.flow.contact_reference`);
+            ``None`` skips the static flow.
+        keep_fields: also return the full (T, H, W, 2) flow fields.
+        progress: optional callable taking the number of frames just processed.
+    """
+    activation = finite_array("activation", activation, ndim=2, last=24, min_len=1)
+    if view not in model.plans:
+        raise ValueError(f"view: expected one of {sorted(model.plans)}, got {view!r}")
+    c = model.config
+    n = len(activation)
+    if reference is not None and not 0 <= reference < n:
+        raise ValueError(f"reference: expected a frame index in [0, {n}), got {reference}")
+    plan = model.plans[view]
+    estimate = flow.FlowEstimator(c.flow)
+    u8 = np.empty((n,) + plan.shape, np.uint8)
+    for start in range(0, n, c.chunk):
+        stop = min(n, start + c.chunk)
+        u8[start:stop] = model.to_uint8(model.render(activation[start:stop], view))
+        if progress:
+            progress(stop - start)
+
+    dyn = np.zeros((n,) + plan.shape + (2,), np.float32)
+    for t in range(1, n):
+        dyn[t] = estimate(u8[t - 1], u8[t])
+    result = ViewResult(frames=u8, dynamic=aggregate.aggregate_flow(dyn, plan.mask, c.noise),
+                        static=None, reference=reference, dynamic_field=dyn if keep_fields else None)
+    if reference is not None:
+        ref = u8[reference]
+        sta = np.stack([estimate(ref, f) for f in u8])
+        result.static = aggregate.aggregate_flow(sta, plan.mask, c.noise)
+        result.static_field = sta if keep_fields else None
+    return result
+
+
+def activation_from_counts(counts, baseline_impedance, model: TactileModel) -> np.ndarray:
+    """Raw electrode counts (T, ..., 24) → smoothed activation (T, ..., 24), kΩ.
+
+    ``baseline_impedance`` (..., 24) kΩ: from a rest stretch
+    (:func:`tactile.signals.baseline_from_rest`) or a stored calibration.
+    """
+    return model.smooth(signals.activation(signals.counts_to_impedance(counts), baseline_impedance))

@@ -1,0 +1,100 @@
+"""Surface mesh, kernel interpolation, tactile surface and z-buffered frames."""
+
+import numpy as np
+import pytest
+
+from tactile import frames, surface
+from tactile.frames import View
+
+
+def test_mesh_covers_the_contact_half_evenly(model):
+    mesh = model.mesh
+    assert np.all(mesh.local_points[:, 2] <= 1e-9)                  # contact side only
+    edges = np.concatenate([mesh.triangles[:, [0, 1]], mesh.triangles[:, [1, 2]], mesh.triangles[:, [2, 0]]])
+    lengths = np.linalg.norm(mesh.points[edges[:, 0]] - mesh.points[edges[:, 1]], axis=1)
+    assert lengths.max() < 2.5 * model.config.mesh_spacing
+    # Outward orientation: face normals agree with the surface normals.
+    p = mesh.points[mesh.triangles]
+    fn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    assert np.all(np.einsum("ij,ij->i", fn, mesh.normals[mesh.triangles].mean(1)) > 0)
+
+
+def test_interpolation_reproduces_a_constant_and_peaks_at_the_pressed_taxel(model):
+    w = model.weights
+    assert np.allclose(w.sum(axis=1), 1.0)
+    values = surface.interpolate(np.full(24, 3.0), w)
+    assert np.allclose(values, 3.0)
+    one = np.zeros(24)
+    one[20] = 1.0                                                   # taxel 21 on the pad
+    values = surface.interpolate(one, w)
+    peak = model.mesh.points[np.argmax(values)]
+    assert np.linalg.norm(peak[:2] - model.taxels[20, :2]) < 1.5
+
+
+def test_tactile_surface_moves_along_normals(model):
+    mesh = model.mesh
+    disp = surface.tactile_surface(mesh, np.full(mesh.n_vertices, 2.0), scale=0.5)
+    assert np.allclose(np.linalg.norm(disp - mesh.points, axis=1), 1.0)
+    assert np.allclose(np.einsum("ij,ij->i", disp - mesh.points, mesh.normals), 1.0)
+
+
+def test_frame_interpolates_linear_fields_exactly(model):
+    plan = model.plans["bottom"]
+    x = model.mesh.points[:, 0]
+    img = frames.render(plan, model.mesh, x[None], scale=0.0)[0]
+    cols = plan.origin[0] + plan.mm_per_px * np.arange(plan.shape[1])
+    expected = np.broadcast_to(cols, plan.shape)
+    assert plan.mask.any(axis=0).sum() >= 0.8 * plan.shape[1]       # the footprint fills the frame
+    assert np.allclose(img[plan.mask], expected[plan.mask], atol=1e-4)
+    assert np.all(img[~plan.mask] == 0)
+
+
+def test_zbuffer_shows_the_nearest_surface(model):
+    """A view that sees both halves must show the half nearer the camera."""
+    mesh = model.mesh
+    side = np.sign(mesh.local_points[:, 1])                          # −1 on y<0, +1 on y>0
+    plan = frames.make_plan(mesh, View("left_all", look=(0, 1, 0), up=(0, 0, 1), half="all"))
+    img = frames.render(plan, mesh, side[None], scale=0.0)[0]
+    inner = plan.mask & (np.abs(img) > 0)
+    assert np.mean(img[inner] < 0) > 0.97                             # the y<0 half is in front
+
+
+def test_displacement_pushes_the_silhouette_outward(model):
+    plan, mesh = model.plans["bottom"], model.mesh
+    flat = frames.render(plan, mesh, np.full((1, mesh.n_vertices), 2.0), scale=0.0)[0]
+    bulged = frames.render(plan, mesh, np.full((1, mesh.n_vertices), 2.0), scale=0.5)[0]
+    assert (bulged > 0).sum() > (flat > 0).sum()
+    centre = tuple(s // 2 for s in plan.shape)
+    assert bulged[centre] == pytest.approx(2.0)
+
+
+def test_fixed_intensity_scale_keeps_brightness_comparable():
+    a = frames.to_uint8(np.full((1, 4, 4), 1.0), 0.0, 4.0)
+    b = frames.to_uint8(np.full((1, 4, 4), 2.0), 0.0, 4.0)
+    assert int(b[0, 0, 0]) == 2 * int(a[0, 0, 0]) - 0 or abs(int(b[0, 0, 0]) - 2 * int(a[0, 0, 0])) <= 1
+    assert a[0, 0, 0] != b[0, 0, 0]                                   # no per-frame normalisation
+    with pytest.raises(ValueError, match="intensity range"):
+        frames.to_uint8(np.zeros((1, 4, 4)), 1.0, 1.0)
+
+
+def test_default_views_axes():
+    cols, rows, look = frames.view_axes(frames.DEFAULT_VIEWS["bottom"])
+    assert np.allclose([cols, rows, look], [[1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    for name in ("left", "right"):
+        c, r, l = frames.view_axes(frames.DEFAULT_VIEWS[name])
+        assert np.allclose(np.cross(c, r), l) and np.allclose(r, [0, 0, -1])
+
+
+def test_bad_frame_input(model):
+    with pytest.raises(ValueError, match="size"):
+        frames.make_plan(model.mesh, frames.DEFAULT_VIEWS["bottom"], size=(4, 32))
+    with pytest.raises(ValueError, match="too small"):
+        frames.make_plan(model.mesh, frames.DEFAULT_VIEWS["bottom"], size=(16, 16), mm_per_px=0.2)
+    with pytest.raises(ValueError, match="up"):
+        frames.view_axes(View("bad", look=(0, 0, 1), up=(0, 0, 2)))
+    with pytest.raises(ValueError, match="values"):
+        frames.render(model.plans["bottom"], model.mesh, np.zeros((2, 5)), scale=0.0)
+    with pytest.raises(ValueError, match="values"):
+        frames.render(model.plans["bottom"], model.mesh, np.full((1, model.mesh.n_vertices), np.nan), 0.0)
+    with pytest.raises(ValueError, match="activation"):
+        surface.interpolate(np.zeros(23), model.weights)
