@@ -1,0 +1,96 @@
+"""Tactile sensor interface (SynTouch BioTac SP, up to five, Shadow finger order).
+
+Every channel is a raw 12-bit count (0..4095) as the sensor reports it: 24 electrodes
+(impedance sensing: the count falls as the skin is pressed over the electrode), PDC
+(static fluid pressure), TDC (temperature), TAC (temperature change), all at ~100 Hz,
+and PAC (dynamic pressure, vibration) at 2.2 kHz, delivered in batches with each frame.
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from .device import Device
+from .errors import ConfigError
+
+FINGERS: tuple[str, ...] = ("ff", "mf", "rf", "lf", "th")
+"""Shadow Hand finger order."""
+
+N_TAXELS = 24
+COUNTS_MAX = 4095
+PAC_RATE_HZ = 2200.0
+
+
+def check_fingers(fingers, key: str = "hardware.fingers") -> tuple[str, ...]:
+    """Validate a finger subset and return it in Shadow order.
+
+    Raises :class:`~hardware.errors.ConfigError` naming ``key`` for an unknown or
+    duplicated name or an empty list.
+    """
+    if isinstance(fingers, str):
+        raise ConfigError(key, f"expected a list of finger names, got the string {fingers!r}")
+    fingers = list(fingers)
+    if not fingers:
+        raise ConfigError(key, "expected at least one finger of ff, mf, rf, lf, th")
+    for i, f in enumerate(fingers):
+        if f not in FINGERS:
+            raise ConfigError(f"{key}[{i}]", f"{f!r} is not a finger; expected one of "
+                                             f"{', '.join(FINGERS)}")
+    if len(set(fingers)) != len(fingers):
+        raise ConfigError(key, f"duplicated finger name in {fingers}")
+    return tuple(f for f in FINGERS if f in fingers)
+
+
+@dataclass(frozen=True)
+class BiotacFrame:
+    """One frame of all connected sensors.
+
+    Attributes:
+        seq: device sequence number (increments by one per frame produced; a jump means
+            frames were lost).
+        device_time: the sensor bridge's timestamp (s, its own clock).
+        host_time: host clock time of receipt (s).
+        electrodes: (F, 24) int16 counts, F = len(fingers), taxels 1..24.
+        pdc, tdc, tac: (F,) int32 counts.
+        pac: (F, n_pac) int16 counts, the 2.2 kHz samples since the previous frame.
+
+    A corrupted frame is delivered as received: values outside 0..4095 mark it
+    (see :meth:`is_valid`).
+    """
+
+    seq: int
+    device_time: float
+    host_time: float
+    electrodes: np.ndarray
+    pdc: np.ndarray
+    tdc: np.ndarray
+    tac: np.ndarray
+    pac: np.ndarray
+
+    def is_valid(self) -> bool:
+        """False if any channel lies outside the 12-bit range 0..4095."""
+        return all(bool(np.all((a >= 0) & (a <= COUNTS_MAX)))
+                   for a in (self.electrodes, self.pdc, self.tdc, self.tac, self.pac))
+
+
+class TactileSensors(Device):
+    """The set of BioTacs on the hand, read as a stream of frames."""
+
+    kind = "biotac"
+
+    @property
+    @abstractmethod
+    def fingers(self) -> tuple[str, ...]:
+        """Connected fingers, in Shadow order (the F axis of every frame)."""
+
+    @property
+    @abstractmethod
+    def rate_hz(self) -> float:
+        """Nominal frame rate (Hz)."""
+
+    @abstractmethod
+    def read(self) -> list[BiotacFrame]:
+        """Every frame received since the last call (oldest first); never blocks long."""

@@ -1,0 +1,95 @@
+"""What every device has in common: identity, connect/close, context manager, a clock.
+
+A device is created unconnected; ``connect()`` opens the link (idempotent) and
+``close()`` releases it (idempotent, never raises for an already closed device).
+``with device:`` connects on entry and closes on exit. Every other call on an unconnected
+device raises :class:`~hardware.errors.NotConnectedError`.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+from .errors import NotConnectedError
+
+
+@dataclass(frozen=True)
+class DeviceIdentity:
+    """Provenance of a device: what it is, which one, and what it runs.
+
+    Attributes:
+        model: e.g. ``"UR10"``, ``"BioTac SP"``, ``"SimArm"``.
+        serial_or_address: serial number, IP address, port or ``sim://`` URL.
+        firmware: firmware / controller / simulator version string.
+    """
+
+    model: str
+    serial_or_address: str
+    firmware: str
+
+    def to_dict(self) -> dict[str, str]:
+        return {"model": self.model, "serial_or_address": self.serial_or_address,
+                "firmware": self.firmware}
+
+
+@runtime_checkable
+class Clock(Protocol):
+    """Time source shared by the devices and the run engine (never call ``time.sleep``).
+
+    ``now()`` returns seconds on a monotonic time base; ``sleep(dt)`` waits ``dt`` seconds
+    of *that* time base (simulated time for :class:`hardware.sim.SimClock`).
+    """
+
+    def now(self) -> float: ...
+
+    def sleep(self, dt: float) -> None: ...
+
+
+class WallClock:
+    """The host's monotonic clock (``time.monotonic``), for real hardware."""
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def sleep(self, dt: float) -> None:
+        if dt > 0:
+            time.sleep(dt)
+
+
+class Device(ABC):
+    """Base of every device interface: connect/close, identity, context manager."""
+
+    #: short name used in error messages and fault configs ("arm", "hand", "biotac", ...)
+    kind: str = "device"
+
+    @abstractmethod
+    def connect(self) -> None:
+        """Open the link to the device (idempotent)."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the device (idempotent; safe after a failure)."""
+
+    @property
+    @abstractmethod
+    def is_connected(self) -> bool:
+        """True between a successful ``connect()`` and ``close()`` (or a lost link)."""
+
+    @property
+    @abstractmethod
+    def identity(self) -> DeviceIdentity:
+        """Model, serial number or address, firmware of the device."""
+
+    def _require_connected(self) -> None:
+        if not self.is_connected:
+            raise NotConnectedError(f"{self.kind}: not connected (call connect() first)")
+
+    def __enter__(self):
+        self.connect()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

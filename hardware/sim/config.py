@@ -1,0 +1,306 @@
+"""Configuration of the simulated lab (mirrors ``conf/hardware/sim.yaml``).
+
+Plain dataclasses (usable as Hydra structured configs). :func:`load_config` builds them
+from a dict or an OmegaConf node, refusing unknown keys and bad values with a
+:class:`~hardware.errors.ConfigError` naming the dotted key, e.g. ``hardware.fingers[2]``.
+Units are in the key names (``_m``, ``_mm``, ``_s``, ``_hz``, ``_n``, ``_g``, ...).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+from ..biotac import FINGERS, check_fingers
+from ..errors import ConfigError
+
+DEVICES = ("arm", "hand", "biotac", "pump", "scale")
+
+
+def _default_fingertips() -> dict[str, list[float]]:
+    # Sensor frame relative to the TCP frame: [x, y, z] m, [rx, ry, rz] rad. Rotating π
+    # about x turns the sensor's contact side (-z) to the tool direction (+z of the TCP):
+    # with the TCP pointing down ([π, 0, 0]) the sensor axes align with the base axes.
+    # ff is the TCP; the others sit beside it and 30 mm higher, clear of a sweep.
+    pi = math.pi
+    return {"ff": [0.0, 0.0, 0.0, pi, 0.0, 0.0],
+            "mf": [0.0, 0.022, -0.03, pi, 0.0, 0.0],
+            "rf": [0.0, 0.044, -0.03, pi, 0.0, 0.0],
+            "lf": [0.0, 0.066, -0.03, pi, 0.0, 0.0],
+            "th": [0.03, -0.04, -0.03, pi, 0.0, 0.0]}
+
+
+@dataclass
+class WorkspaceConfig:
+    """Box in the robot base frame (m) the TCP must stay in (the simulated table's reach)."""
+    min_m: list[float] = field(default_factory=lambda: [-0.2, -0.4, 0.0])
+    max_m: list[float] = field(default_factory=lambda: [0.8, 0.4, 0.6])
+
+
+@dataclass
+class ArmConfig:
+    home_pose: list[float] = field(default_factory=lambda: [0.3, 0.0, 0.2, math.pi, 0.0, 0.0])
+    max_speed_m_s: float = 0.25
+    max_accel_m_s2: float = 2.0
+    stop_accel_m_s2: float = 4.0          # deceleration of a protective stop
+    max_contact_force_n: float = 40.0     # above it the controller stops protectively
+    wrench_noise_n: float = 0.05
+
+
+@dataclass
+class ContactConfig:
+    """Fingertip skin and friction."""
+    stiffness_n_mm2: float = 0.08         # local pressure = k · indentation^exponent (N/mm², mm)
+    exponent: float = 1.5                 # Hertz-like
+    friction: float = 0.6                 # sliding friction coefficient
+    slip_speed_m_s: float = 0.001         # speed at which sliding friction is fully developed
+    mesh_theta: int = 28                  # ellipsoid sampling (contact half): rings
+    mesh_phi: int = 56                    # points per ring
+
+
+@dataclass
+class SensorModelConfig:
+    """BioTac model; resting statistics come from ``calibration`` (a file in hardware/sim)."""
+    calibration: str = "biotac_rest_calibration.json"
+    noise_scale: float = 1.0
+    drift_scale: float = 1.0
+    drift_tau_s: float = 600.0            # warm-up drift settles with this time constant
+    baseline_jitter_counts: float = 40.0  # per-taxel spread added to the real baselines
+    kernel_sigma_mm: float = 3.0          # taxel's spatial sensitivity to pressure
+    impedance_per_n: float = 12.0         # kΩ of electrode impedance per N of taxel load
+    shear_gain: float = 0.3               # taxel load per N of shear (leading +, trailing -)
+    shear_length_mm: float = 6.0
+    far_rise_per_n: float = 0.01          # relative impedance drop of all electrodes per N
+    pdc_counts_per_n: float = 140.0
+    pdc_saturation_n: float = 20.0
+    pac_gain_per_n_s: float = 15.0        # PAC counts per N/s of force change
+    pac_slip_gain: float = 15.0           # PAC noise std (counts) per N of sliding friction
+    tac_counts_per_n: float = 4.0         # heat flow into a touched object cools TAC
+    latency_s: float = 0.0015             # host receipt after device time
+    clock_drift_ppm: float = 20.0
+
+
+@dataclass
+class HandConfig:
+    default_positions: dict[str, float] = field(default_factory=dict)
+    max_velocity_rad_s: float = 2.0
+
+
+@dataclass
+class PourConfig:
+    """Bottle held in the grasp while the pump fills it."""
+    bottle_in_hand: bool = True
+    grasp_fingers: list[str] = field(default_factory=lambda: ["ff", "mf", "th"])
+    contact_flexion_rad: float = 1.0      # J2+J3 (thumb J1+J2) at which the finger meets the bottle
+    grip_n_per_rad: float = 8.0           # normal force per rad of commanded closure beyond contact
+    bottle_empty_g: float = 60.0
+    friction_static: float = 0.8
+    partial_slip_ratio: float = 0.6       # weight / (μs·N) at which the contact edge starts to slip
+    com_offset_m: float = 0.03            # grasp to centre of mass: gravity's lever arm
+    torsion_arm_m: float = 0.024          # torque the grip resists per N of friction
+    rotation_damping_n_m_s: float = 0.05
+    max_rotation_rad: float = 0.5
+    slide_damping_n_s_m: float = 150.0    # viscous creep of the downward slide
+    full_slip_mm: float = 12.0            # slide distance at which the bottle leaves the fingers
+    stretch_mm_per_n: float = 0.4         # skin stretch under shear (static flow)
+    max_stretch_mm: float = 2.0
+    gravity_sensor: list[float] = field(default_factory=lambda: [0.0, 1.0, 0.0])
+
+
+@dataclass
+class PumpConfig:
+    max_rate_ml_min: float = 150.0
+    rate_hz: float = 10.0
+
+
+@dataclass
+class ScaleConfig:
+    reservoir_g: float = 1500.0           # the scale weighs the reservoir the pump draws from
+    noise_g: float = 0.05
+    resolution_g: float = 0.01
+    rate_hz: float = 10.0
+    settle_s: float = 0.5                 # unstable while the reading changed within this window
+
+
+@dataclass
+class FaultsConfig:
+    """Faults injected at given simulated times (s)."""
+    biotac_dropout: list[list[float]] = field(default_factory=list)  # [[t0, t1], ...] no frames
+    biotac_corrupt: list[float] = field(default_factory=list)        # frames at these times garbled
+    protective_stop_s: Optional[float] = None
+    disconnect: dict[str, float] = field(default_factory=dict)       # device -> time
+
+
+@dataclass
+class SimConfig:
+    """The simulated lab (``hardware=sim``)."""
+    backend: str = "sim"
+    seed: int = 0
+    realtime: bool = False
+    fingers: list[str] = field(default_factory=lambda: list(FINGERS))
+    step_s: float = 0.002                 # world step = arm controller period (500 Hz)
+    biotac_rate_hz: float = 100.0
+    hand_rate_hz: float = 100.0
+    buffer_s: float = 120.0               # device buffers hold this much unread data
+    workspace: WorkspaceConfig = field(default_factory=WorkspaceConfig)
+    arm: ArmConfig = field(default_factory=ArmConfig)
+    fingertips: dict[str, list[float]] = field(default_factory=_default_fingertips)
+    contact: ContactConfig = field(default_factory=ContactConfig)
+    sensor: SensorModelConfig = field(default_factory=SensorModelConfig)
+    hand: HandConfig = field(default_factory=HandConfig)
+    pour: PourConfig = field(default_factory=PourConfig)
+    pump: PumpConfig = field(default_factory=PumpConfig)
+    scale: ScaleConfig = field(default_factory=ScaleConfig)
+    faults: FaultsConfig = field(default_factory=FaultsConfig)
+
+
+# --------------------------------------------------------------------------- building
+
+def to_plain(data: Any) -> Any:
+    """An OmegaConf node (or anything) as plain dicts/lists."""
+    try:
+        from omegaconf import DictConfig, ListConfig, OmegaConf
+        if isinstance(data, (DictConfig, ListConfig)):
+            return OmegaConf.to_container(data, resolve=True)
+    except ImportError:  # pragma: no cover
+        pass
+    if dataclasses.is_dataclass(data) and not isinstance(data, type):
+        return dataclasses.asdict(data)
+    return data
+
+
+def build(cls, data, key: str):
+    """Instantiate dataclass ``cls`` from ``data`` (dict, dataclass, OmegaConf, None)."""
+    data = to_plain(data)
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(key, f"expected a mapping, got {type(data).__name__}")
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    kwargs = {}
+    for k, v in data.items():
+        if k not in names:
+            raise ConfigError(f"{key}.{k}", f"unknown key; expected one of {', '.join(sorted(names))}")
+        kwargs[k] = _coerce(hints[k], v, f"{key}.{k}")
+    return cls(**kwargs)
+
+
+def _coerce(tp, v, key):
+    origin = typing.get_origin(tp)
+    if dataclasses.is_dataclass(tp):
+        return build(tp, v, key)
+    if origin is typing.Union:  # Optional[X]
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return None if v is None else _coerce(args[0], v, key)
+    if origin is list:
+        if not isinstance(v, (list, tuple)):
+            raise ConfigError(key, f"expected a list, got {v!r}")
+        (arg,) = typing.get_args(tp)
+        return [_coerce(arg, x, f"{key}[{i}]") for i, x in enumerate(v)]
+    if origin is dict:
+        if not isinstance(v, dict):
+            raise ConfigError(key, f"expected a mapping, got {v!r}")
+        _, arg = typing.get_args(tp)
+        return {str(k): _coerce(arg, x, f"{key}.{k}") for k, x in v.items()}
+    if tp is bool:
+        if not isinstance(v, bool):
+            raise ConfigError(key, f"expected true or false, got {v!r}")
+        return v
+    if tp in (int, float):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (tp is int and not float(v).is_integer()):
+            raise ConfigError(key, f"expected a number ({tp.__name__}), got {v!r}")
+        if not math.isfinite(v):
+            raise ConfigError(key, f"expected a finite number, got {v!r}")
+        return tp(v)
+    if tp is str:
+        if not isinstance(v, str):
+            raise ConfigError(key, f"expected a string, got {v!r}")
+        return v
+    return v
+
+
+def _positive(obj, key, names):
+    for n in names:
+        v = getattr(obj, n)
+        if not v > 0:
+            raise ConfigError(f"{key}.{n}", f"expected a value > 0, got {v!r}")
+
+
+def _nonneg(obj, key, names):
+    for n in names:
+        v = getattr(obj, n)
+        if v < 0:
+            raise ConfigError(f"{key}.{n}", f"expected a value >= 0, got {v!r}")
+
+
+def validate(cfg: SimConfig, key: str = "hardware") -> SimConfig:
+    """Check values; raises ConfigError naming the key. Returns ``cfg`` (fingers in Shadow order)."""
+    if cfg.backend != "sim":
+        raise ConfigError(f"{key}.backend", f"expected 'sim', got {cfg.backend!r}")
+    cfg.fingers = list(check_fingers(cfg.fingers, f"{key}.fingers"))
+    _positive(cfg, key, ["step_s", "biotac_rate_hz", "hand_rate_hz", "buffer_s"])
+    for n in ("biotac_rate_hz", "hand_rate_hz"):
+        ticks = 1.0 / (getattr(cfg, n) * cfg.step_s)
+        if abs(ticks - round(ticks)) > 1e-9 or round(ticks) < 1:
+            raise ConfigError(f"{key}.{n}", f"the period must be a whole number of step_s "
+                                            f"({cfg.step_s} s), got {getattr(cfg, n)} Hz")
+    for n in ("pump", "scale"):
+        ticks = 1.0 / (getattr(cfg, n).rate_hz * cfg.step_s)
+        if abs(ticks - round(ticks)) > 1e-9 or round(ticks) < 1:
+            raise ConfigError(f"{key}.{n}.rate_hz", f"the period must be a whole number of step_s")
+    for f in cfg.fingers:
+        if f not in cfg.fingertips:
+            raise ConfigError(f"{key}.fingertips", f"no pose for finger {f!r}")
+    for f, pose in cfg.fingertips.items():
+        if f not in FINGERS:
+            raise ConfigError(f"{key}.fingertips.{f}", f"{f!r} is not a finger; expected one of {', '.join(FINGERS)}")
+        if len(pose) != 6:
+            raise ConfigError(f"{key}.fingertips.{f}", f"expected [x,y,z,rx,ry,rz] (m, rad), got {pose}")
+    if len(cfg.arm.home_pose) != 6:
+        raise ConfigError(f"{key}.arm.home_pose", "expected [x,y,z,rx,ry,rz] (m, rad)")
+    _positive(cfg.arm, f"{key}.arm", ["max_speed_m_s", "max_accel_m_s2", "stop_accel_m_s2", "max_contact_force_n"])
+    _nonneg(cfg.arm, f"{key}.arm", ["wrench_noise_n"])
+    _positive(cfg.contact, f"{key}.contact", ["stiffness_n_mm2", "exponent", "slip_speed_m_s", "mesh_theta", "mesh_phi"])
+    _nonneg(cfg.contact, f"{key}.contact", ["friction"])
+    s = cfg.sensor
+    _positive(s, f"{key}.sensor", ["drift_tau_s", "kernel_sigma_mm", "impedance_per_n", "shear_length_mm",
+                                   "pdc_counts_per_n", "pdc_saturation_n"])
+    _nonneg(s, f"{key}.sensor", ["noise_scale", "drift_scale", "baseline_jitter_counts", "shear_gain",
+                                 "far_rise_per_n", "pac_gain_per_n_s", "pac_slip_gain", "tac_counts_per_n",
+                                 "latency_s", "clock_drift_ppm"])
+    p = cfg.pour
+    check_fingers(p.grasp_fingers, f"{key}.pour.grasp_fingers")
+    _positive(p, f"{key}.pour", ["grip_n_per_rad", "friction_static", "partial_slip_ratio", "torsion_arm_m",
+                                 "rotation_damping_n_m_s", "slide_damping_n_s_m", "full_slip_mm", "max_rotation_rad"])
+    _nonneg(p, f"{key}.pour", ["bottle_empty_g", "com_offset_m", "stretch_mm_per_n", "max_stretch_mm",
+                               "contact_flexion_rad"])
+    if len(p.gravity_sensor) != 3 or math.hypot(*p.gravity_sensor) == 0:
+        raise ConfigError(f"{key}.pour.gravity_sensor", "expected a non-zero 3-vector in the sensor frame")
+    _positive(cfg.pump, f"{key}.pump", ["max_rate_ml_min", "rate_hz"])
+    _positive(cfg.scale, f"{key}.scale", ["resolution_g", "rate_hz", "settle_s"])
+    _nonneg(cfg.scale, f"{key}.scale", ["reservoir_g", "noise_g"])
+    fk = f"{key}.faults"
+    for i, w in enumerate(cfg.faults.biotac_dropout):
+        if len(w) != 2 or not 0 <= w[0] < w[1]:
+            raise ConfigError(f"{fk}.biotac_dropout[{i}]", f"expected [t0, t1] with 0 <= t0 < t1 (s), got {w}")
+    for i, t in enumerate(cfg.faults.biotac_corrupt):
+        if t < 0:
+            raise ConfigError(f"{fk}.biotac_corrupt[{i}]", f"expected a time >= 0 (s), got {t}")
+    if cfg.faults.protective_stop_s is not None and cfg.faults.protective_stop_s < 0:
+        raise ConfigError(f"{fk}.protective_stop_s", "expected a time >= 0 (s)")
+    for dev, t in cfg.faults.disconnect.items():
+        if dev not in DEVICES:
+            raise ConfigError(f"{fk}.disconnect.{dev}", f"unknown device; expected one of {', '.join(DEVICES)}")
+        if t < 0:
+            raise ConfigError(f"{fk}.disconnect.{dev}", "expected a time >= 0 (s)")
+    return cfg
+
+
+def load_config(data=None, key: str = "hardware") -> SimConfig:
+    """A validated :class:`SimConfig` from a dict / OmegaConf node / SimConfig / None (defaults)."""
+    cfg = build(SimConfig, data, key)
+    return validate(cfg, key)

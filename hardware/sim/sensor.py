@@ -1,0 +1,119 @@
+"""BioTac SP signal model: resting statistics calibrated on a real recording, plus load.
+
+Resting behaviour per sensor comes from ``biotac_rest_calibration.json`` (derived by
+:mod:`hardware.sim.calibrate` from a real Shadow Hand bag, source cited inside): the
+three real sensors are templates; simulated finger ``ff`` uses template 0, ``mf`` 1,
+``th`` 2 (the fingers they were recorded on), ``rf`` and ``lf`` reuse 0 and 1. Each
+simulated sensor perturbs its template's baselines by ``baseline_jitter_counts`` so no
+two are identical. Electrode noise is AR(1) with the real lag-1 autocorrelation and
+per-electrode std; drift is the real warm-up slope, settling with ``drift_tau_s``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from ..biotac import FINGERS
+from .config import SensorModelConfig
+from .contact import counts_from_impedance, impedance_from_counts, impedance_kohm, pdc_rise, quantise
+
+TEMPLATE_OF_FINGER = {"ff": 0, "mf": 1, "th": 2, "rf": 0, "lf": 1}
+N_PAC = 22   # 2.2 kHz / 100 Hz
+
+
+@lru_cache(maxsize=4)
+def load_calibration(name: str) -> dict:
+    """The calibration JSON shipped in ``hardware/sim`` (or an absolute path)."""
+    path = Path(name) if Path(name).is_absolute() else Path(__file__).with_name(name)
+    if not path.exists():
+        raise FileNotFoundError(f"hardware.sensor.calibration: no file {path}")
+    return json.loads(path.read_text())
+
+
+@dataclass
+class SensorInputs:
+    """Physical inputs of all fingers for one frame (F = number of fingers).
+
+    ``load``: (F, 24) taxel load N-equivalent; ``force``: (F,) total normal force N;
+    ``force_rate``: (F,) dF/dt N/s; ``friction``: (F,) sliding friction force N.
+    """
+
+    load: np.ndarray
+    force: np.ndarray
+    force_rate: np.ndarray
+    friction: np.ndarray
+
+
+class BiotacModel:
+    """Per-finger parameters and noise state; :meth:`frame` turns loads into counts."""
+
+    def __init__(self, fingers, cfg: SensorModelConfig, rng: np.random.Generator,
+                 frame_dt: float = 0.01):
+        cal = load_calibration(cfg.calibration)
+        self.cfg, self.rng, self.dt = cfg, rng, frame_dt
+        tpl = [cal["sensors"][TEMPLATE_OF_FINGER[f] % len(cal["sensors"])] for f in fingers]
+        F = len(fingers)
+        g = lambda k: np.array([t[k] for t in tpl], float)
+        self.baseline = g("electrode_baseline") + rng.normal(0, cfg.baseline_jitter_counts, (F, 24))
+        self.baseline = np.clip(self.baseline, 200, 3900)
+        self.z0 = impedance_from_counts(self.baseline)
+        self.noise_std = cfg.noise_scale * g("electrode_noise_std") * rng.uniform(0.9, 1.1, (F, 24))
+        self.phi = float(np.median([t["electrode_noise_lag1"] for t in tpl]))
+        self.drift = cfg.drift_scale * g("electrode_drift_per_s") * rng.uniform(0.8, 1.2, (F, 24))
+        s = lambda ch, k: np.array([t[ch][k] for t in tpl], float)
+        self.pdc0, self.pdc_std, self.pdc_drift = s("pdc", "mean"), cfg.noise_scale * s("pdc", "noise_std"), \
+            cfg.drift_scale * s("pdc", "drift_per_s")
+        self.tdc0, self.tdc_std, self.tdc_drift = s("tdc", "mean"), cfg.noise_scale * s("tdc", "noise_std"), \
+            cfg.drift_scale * s("tdc", "drift_per_s")
+        self.tac0, self.tac_std = s("tac", "mean"), cfg.noise_scale * s("tac", "noise_std")
+        self.pac0, self.pac_std = s("pac", "mean"), cfg.noise_scale * s("pac", "noise_std")
+        self._ar = rng.normal(0, 1, (F, 24)) * self.noise_std
+        self._heat = np.zeros(F)
+        self._pac_phase = rng.uniform(0, 2 * np.pi, F)
+        self.F = F
+
+    def _warmup(self, t: float) -> float:
+        """Drift multiplier: seconds of equivalent linear drift after ``t`` s of warm-up."""
+        tau = self.cfg.drift_tau_s
+        return tau * (1.0 - np.exp(-t / tau))
+
+    def frame(self, t: float, inp: SensorInputs):
+        """Counts for one frame at time ``t`` (s): electrodes (F, 24), pdc, tdc, tac (F,), pac (F, 22).
+
+        Returns float arrays already quantised to integers in 0..4095.
+        """
+        c, rng, F = self.cfg, self.rng, self.F
+        w = self._warmup(t)
+        rest = self.baseline + self.drift * w
+        z = impedance_kohm(impedance_from_counts(rest), inp.load, inp.force, c.impedance_per_n, c.far_rise_per_n)
+        innov = rng.standard_normal((F, 24)) * self.noise_std * np.sqrt(1 - self.phi ** 2)
+        self._ar = self.phi * self._ar + innov
+        electrodes = quantise(counts_from_impedance(z) + self._ar)
+        pdc = quantise(self.pdc0 + self.pdc_drift * w + pdc_rise(inp.force, c.pdc_counts_per_n, c.pdc_saturation_n)
+                       + rng.standard_normal(F) * self.pdc_std)
+        # a first-order "heat absorbed" state: TAC dips while it catches up with the force
+        k = self.dt / 1.0
+        tac_term = c.tac_counts_per_n * (inp.force - self._heat)
+        self._heat = self._heat + k * (inp.force - self._heat)
+        tac = quantise(self.tac0 - tac_term + rng.standard_normal(F) * self.tac_std)
+        tdc = quantise(self.tdc0 + self.tdc_drift * w - 0.5 * c.tac_counts_per_n * self._heat
+                       + rng.standard_normal(F) * self.tdc_std)
+        pac = self._pac(inp)
+        return electrodes, pdc, tdc, tac, pac
+
+    def _pac(self, inp: SensorInputs) -> np.ndarray:
+        """22 PAC samples per finger: noise, a ringing burst on force changes (edges),
+        broadband noise proportional to sliding friction."""
+        c, rng = self.cfg, self.rng
+        n = np.arange(N_PAC) / 2200.0
+        amp = c.pac_gain_per_n_s * np.abs(inp.force_rate)
+        ring = amp[:, None] * np.sin(2 * np.pi * 250.0 * n + self._pac_phase[:, None]) * np.exp(-n / 0.006)
+        self._pac_phase = (self._pac_phase + 2 * np.pi * 250.0 * N_PAC / 2200.0) % (2 * np.pi)
+        slip = c.pac_slip_gain * inp.friction[:, None] * rng.standard_normal((self.F, N_PAC))
+        noise = self.pac_std[:, None] * rng.standard_normal((self.F, N_PAC))
+        return quantise(self.pac0[:, None] + ring + slip + noise)
