@@ -95,11 +95,6 @@ class FramePlan:
         vectors = np.asarray(vectors, dtype=np.float64)
         return vectors[..., :1] * self.cols + vectors[..., 1:2] * self.rows
 
-    def pixel_of(self, points) -> np.ndarray:
-        """Sensor-frame points (..., 3), mm → (..., 2) pixel coordinates (col, row)."""
-        p = np.asarray(points, dtype=np.float64)
-        return (np.stack([p @ self.cols, p @ self.rows], axis=-1) - self.origin) / self.mm_per_px
-
 
 def view_axes(view: View) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(cols, rows, look) unit vectors of a view; ValueError if ``up`` is parallel to ``look``."""

@@ -164,7 +164,6 @@ def process_view(model: TactileModel, activation, view: str, reference: int | No
     if reference is not None and not 0 <= reference < n:
         raise ValueError(f"reference: expected a frame index in [0, {n}), got {reference}")
     plan = model.plans[view]
-    estimate = flow.FlowEstimator(c.flow)
     u8 = np.empty((n,) + plan.shape, np.uint8)
     for start in range(0, n, c.chunk):
         stop = min(n, start + c.chunk)
@@ -172,14 +171,11 @@ def process_view(model: TactileModel, activation, view: str, reference: int | No
         if progress:
             progress(stop - start)
 
-    dyn = np.zeros((n,) + plan.shape + (2,), np.float32)
-    for t in range(1, n):
-        dyn[t] = estimate(u8[t - 1], u8[t])
+    dyn = flow.dynamic_flow(u8, c.flow)
     result = ViewResult(frames=u8, dynamic=aggregate.aggregate_flow(dyn, plan.mask, c.noise),
                         static=None, reference=reference, dynamic_field=dyn if keep_fields else None)
     if reference is not None:
-        ref = u8[reference]
-        sta = np.stack([estimate(ref, f) for f in u8])
+        sta = flow.static_flow(u8, reference, c.flow)
         result.static = aggregate.aggregate_flow(sta, plan.mask, c.noise)
         result.static_field = sta if keep_fields else None
     return result
