@@ -94,3 +94,9 @@ class TactileSensors(Device):
     @abstractmethod
     def read(self) -> list[BiotacFrame]:
         """Every frame received since the last call (oldest first); never blocks long."""
+
+    @abstractmethod
+    def latest(self) -> BiotacFrame | None:
+        """The newest frame received, without consuming the stream (``None`` before the
+        first). The run engine watches contact criteria with it while the recorder alone
+        drains :meth:`read`."""

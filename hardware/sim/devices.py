@@ -42,6 +42,7 @@ class _SimDevice:
         self._clock_offset = float(self.rng.uniform(100.0, 10000.0))
         self._clock_rate = 1.0 + float(self.rng.uniform(-1, 1)) * world.cfg.sensor.clock_drift_ppm * 1e-6
         self._last_host = -math.inf
+        self._latest = None
 
     # -- connection ------------------------------------------------------------------
     @property
@@ -90,6 +91,7 @@ class _SimDevice:
         if len(self.buffer) == self.buffer.maxlen:
             self.overflows += 1
         self.buffer.append(sample)
+        self._latest = sample
 
     def _drain(self) -> list:
         self._require_connected()
@@ -281,6 +283,10 @@ class SimBiotac(_SimDevice, TactileSensors):
     @property
     def rate_hz(self) -> float:
         return self.cfg.biotac_rate_hz
+
+    def latest(self):
+        self._require_connected()
+        return self._latest
 
     @property
     def calibration(self) -> dict:

@@ -1,0 +1,246 @@
+"""The run engine: executes a checked plan against the hardware interfaces.
+
+Lifecycle (as Bluesky's RunEngine): ``running`` → one of
+
+- ``success``: every step ended;
+- ``aborted``: the operator stopped the run (Ctrl-C or SIGTERM once: the current motion is
+  stopped, the finger retracted, the store closed; Ctrl-C twice: stop at once, no retract);
+- ``failed``: a step raised (device fault, protective stop, criterion never met...): motion
+  stopped, the pump stopped, a retract if the arm is free to move, the error recorded.
+
+Every step is framed by ``step_start``/``step_end`` events in the run store. The engine
+runs on the thread that built the lab: in simulation that thread drives simulated time.
+Steps poll once per BioTac period, watching the stop request and their criteria.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import numpy as np
+
+from hardware.errors import DeviceError
+
+from .plan import Geometry, Limits, Plan, PlannedStep
+from .steps import Criterion
+
+SUCCESS, ABORTED, FAILED = "success", "aborted", "failed"
+RETRACT_MM = 20.0
+TARE_S = 0.5
+
+
+class RunAborted(Exception):
+    """The operator asked the run to stop."""
+
+
+@dataclass
+class Outcome:
+    status: str
+    error: str | None = None
+    steps_done: int = 0
+
+
+class RunContext(Geometry):
+    """What a step's ``run`` sees: the lab, the recorder, parameters and helpers."""
+
+    def __init__(self, lab, recorder, cfg, progress=None):
+        super().__init__(cfg.hardware, lab.surface, cfg.protocol.finger)
+        self.lab, self.recorder, self.params = lab, recorder, cfg.protocol
+        self.limits = Limits.from_hardware(cfg.hardware)
+        self.clock = lab.clock
+        self.poll = 1.0 / lab.biotac.rate_hz
+        self.stop_requested = False
+        self.progress = progress
+        self.fingers = list(lab.biotac.fingers)
+        self.finger_index = self.fingers.index(cfg.protocol.finger)
+        self.tare_pdc = np.zeros(len(self.fingers))
+
+    @property
+    def pose(self) -> np.ndarray:
+        return np.asarray(self.lab.arm.tcp_pose(), float)
+
+    def event(self, kind: str, name: str, detail=None) -> None:
+        self.recorder.event(kind, name, detail)
+
+    def _tick(self) -> None:
+        """Advance one poll period; raise :class:`RunAborted` on a stop request."""
+        t0 = self.clock.now()
+        self.clock.sleep(self.poll)
+        if self.progress:
+            self.progress(self.clock.now() - t0)
+        if self.stop_requested:
+            raise RunAborted("stopped by the operator")
+        if self.lab.arm.is_protective_stopped():
+            raise DeviceError("arm: protective stop")
+
+    def tare(self, seconds: float = TARE_S) -> None:
+        """Average PDC at rest, the zero of the contact criteria (and of the analysis)."""
+        t0 = self.clock.now()
+        samples = []
+        while self.clock.now() - t0 < seconds:
+            self._tick()
+            frame = self.lab.biotac.latest()
+            if frame is not None and frame.is_valid():
+                samples.append(frame.pdc.astype(float))
+        if not samples:
+            raise DeviceError("biotac: no valid frame during the tare; is the sensor streaming?")
+        self.tare_pdc = np.mean(samples, axis=0)
+        self.event("tare", "tare", {"start": t0 - self.recorder.t0, "end": self.clock.now() - self.recorder.t0,
+                                    "pdc": dict(zip(self.fingers, np.round(self.tare_pdc, 1).tolist()))})
+
+    def criterion_met(self, crit: Criterion | None, touched: set | None = None) -> bool:
+        if crit is None:
+            return False
+        frame = self.lab.biotac.latest()
+        rise = None if frame is None or not frame.is_valid() else frame.pdc.astype(float) - self.tare_pdc
+        if crit.pdc_rise is not None and rise is not None and rise[self.finger_index] > crit.pdc_rise:
+            return True
+        if crit.contact_lost is not None and rise is not None and touched:
+            return all(rise[i] < crit.contact_lost for i in touched)
+        if crit.force is not None:
+            return float(np.linalg.norm(self.lab.arm.tcp_wrench()[:3])) > crit.force
+        return False
+
+    def move(self, target, speed_mm_s: float, until: Criterion | None = None) -> bool:
+        """Straight move to ``target``; with ``until``, stop as soon as it holds. Returns
+        whether the criterion ended the move."""
+        self.limits_check(target)
+        self.lab.arm.move_linear(np.asarray(target, float), speed_mm_s * 1e-3, self.params.accel * 1e-3,
+                                 asynchronous=True)
+        while self.lab.arm.is_moving():
+            self._tick()
+            if self.criterion_met(until):
+                self.lab.arm.stop(self.limits.max_accel)
+                self.event("criterion", "move", {"until": until.describe(), "pose": self.pose.round(5).tolist()})
+                while self.lab.arm.is_moving():
+                    self._tick()
+                return True
+        return False
+
+    def wait(self, seconds: float, until: Criterion | None = None) -> bool:
+        """Keep still for ``seconds``, or until ``until`` holds (returns True then)."""
+        end = self.clock.now() + seconds
+        touched = None
+        if until is not None and until.contact_lost is not None:
+            frame = self.lab.biotac.latest()
+            rise = frame.pdc.astype(float) - self.tare_pdc if frame is not None else np.zeros(len(self.fingers))
+            touched = {i for i, r in enumerate(rise) if r > until.contact_lost}
+        while self.clock.now() < end - 1e-9:
+            self._tick()
+            if touched is not None:
+                frame = self.lab.biotac.latest()
+                touched |= {i for i, r in enumerate(frame.pdc.astype(float) - self.tare_pdc) if r > until.contact_lost}
+            if self.criterion_met(until, touched):
+                return True
+        return False
+
+    def limits_check(self, target) -> None:
+        self.lab.arm.check_pose(np.asarray(target, float))
+
+
+class RunEngine:
+    """Runs a :class:`~protocols.plan.Plan` on a connected lab, recording as it goes."""
+
+    def __init__(self, lab, recorder, cfg, plan: Plan, progress_factory=None, log=print):
+        self.lab, self.recorder, self.cfg, self.plan = lab, recorder, cfg, plan
+        self.progress_factory = progress_factory
+        self.log = log
+        self.ctx = RunContext(lab, recorder, cfg)
+        self._interrupts = 0
+
+    def run(self) -> Outcome:
+        done = 0
+        with self._signals():
+            try:
+                self.ctx.tare()
+                for planned in self.plan.steps:
+                    self._run_step(planned)
+                    done += 1
+                return Outcome(SUCCESS, steps_done=done)
+            except RunAborted as exc:
+                self.ctx.event("abort", "operator", {"reason": str(exc), "step": done})
+                self._make_safe(retract=True)
+                reason = "stopped at once by a second Ctrl-C" if self._interrupts > 1 else str(exc)
+                return Outcome(ABORTED, reason, done)
+            except KeyboardInterrupt:
+                self.ctx.event("abort", "operator", {"reason": "second Ctrl-C: immediate stop", "step": done})
+                self._make_safe(retract=False)
+                return Outcome(ABORTED, "stopped at once by a second Ctrl-C", done)
+            except Exception as exc:  # a failing step must still leave the robot safe
+                message = f"{type(exc).__name__}: {exc}"
+                self.ctx.event("error", self.plan.steps[done].name if done < len(self.plan.steps) else "engine",
+                               {"error": message, "step": done})
+                self._make_safe(retract=not self.lab.arm.is_protective_stopped())
+                return Outcome(FAILED, message, done)
+            finally:
+                self._stop_pump()
+
+    def _run_step(self, planned: PlannedStep) -> None:
+        step = planned.step
+        self.ctx.event("step_start", planned.name, {"key": step.key, "params": step.describe(),
+                                                    "expected_s": round(planned.duration, 3)})
+        bar = self.progress_factory(planned) if self.progress_factory else None
+        self.ctx.progress = bar.update if bar else None
+        try:
+            step.run(self.ctx)
+        finally:
+            if bar:
+                bar.close()
+            self.ctx.progress = None
+        self.ctx.event("step_end", planned.name, {"key": step.key})
+
+    def _make_safe(self, retract: bool) -> None:
+        """Stop motion and the pump; optionally back the finger away along the approach."""
+        arm = self.lab.arm
+        try:
+            arm.stop(self.ctx.limits.max_accel)
+            self._stop_pump()
+            if not retract:
+                return
+            self.ctx.stop_requested = False          # the retract itself must be allowed to run
+            while arm.is_moving():
+                self.ctx.clock.sleep(self.ctx.poll)
+            target = self.ctx.pose
+            target[2] += RETRACT_MM * 1e-3
+            if self.ctx.limits.workspace_max[2] >= target[2]:
+                arm.move_linear(target, 0.02, self.ctx.limits.max_accel / 2, asynchronous=True)
+                while arm.is_moving():
+                    self.ctx.clock.sleep(self.ctx.poll)
+                self.ctx.event("retract", "retract", {"mm": RETRACT_MM})
+        except KeyboardInterrupt:             # second Ctrl-C during the retract: stop where we are
+            arm.stop(self.ctx.limits.max_accel)
+            self.log("retract interrupted: stopped at once")
+        except Exception as exc:  # never mask the reason we are stopping
+            self.log(f"warning: could not retract safely: {exc}")
+
+    def _stop_pump(self) -> None:
+        try:
+            self.lab.pump.stop()
+        except Exception as exc:
+            self.log(f"warning: could not stop the pump: {exc}")
+
+    @contextmanager
+    def _signals(self):
+        """Ctrl-C / SIGTERM once: stop safely; Ctrl-C twice: stop at once."""
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+
+        def on_signal(signum, frame):
+            self._interrupts += 1
+            if self._interrupts == 1:
+                self.ctx.stop_requested = True
+                self.log("\nstopping safely: finishing the current motion, retracting "
+                         "(Ctrl-C again to stop at once)")
+            else:
+                raise KeyboardInterrupt
+
+        old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield
+        finally:
+            for s, handler in old.items():
+                signal.signal(s, handler)

@@ -1,0 +1,240 @@
+"""Expand a protocol into a timeline and check it before anything moves.
+
+:func:`make_plan` parses the steps, expands ``repeat``, and walks the whole protocol with a
+planned TCP pose and clock, checking every waypoint against the workspace envelope and
+the arm's reach, every speed, acceleration and force threshold against the hardware's
+limits, and every surface reference against the surface. :func:`format_timeline` prints
+what ``tactile-run plan_only=true`` shows.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from omegaconf import OmegaConf
+
+from hardware.hand import JOINT_NAMES
+from hardware.sim.geometry import rotvec_to_matrix
+from hardware.sim.surfaces import Surface, load_surface
+from tactile.geometry import fit_ellipsoid, load_taxels
+
+from .steps import Criterion, ProtocolError, Repeat, Step, parse_steps
+
+UR10_REACH_M = 1.3          # UR10 working radius from the base axis
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Motion limits from the hardware config (SI units)."""
+
+    workspace_min: np.ndarray
+    workspace_max: np.ndarray
+    max_speed: float                 # m/s
+    max_accel: float                 # m/s²
+    max_force: float                 # N
+    max_pump_rate: float             # ml/min
+    reach: float = UR10_REACH_M      # m
+
+    @classmethod
+    def from_hardware(cls, hw) -> "Limits":
+        return cls(workspace_min=np.asarray(hw.workspace.min_m, float),
+                   workspace_max=np.asarray(hw.workspace.max_m, float),
+                   max_speed=float(hw.arm.max_speed_m_s), max_accel=float(hw.arm.max_accel_m_s2),
+                   max_force=float(hw.arm.max_contact_force_n), max_pump_rate=float(hw.pump.max_rate_ml_min))
+
+
+class Geometry:
+    """Where the TCP must be for the protocol's finger to touch a given place.
+
+    ``hw.fingertips[finger]`` is the sensor's pose in the TCP frame (m, rad); the pad's
+    lowest point in the sensor frame is the pole of the BioTac ellipsoid fitted to the
+    taxels (:mod:`tactile.geometry`). The TCP keeps the orientation of the home pose.
+    """
+
+    def __init__(self, hw, surface: Surface | None, finger: str):
+        if finger not in hw.fingertips:
+            raise ProtocolError("protocol.finger", f"expected one of {sorted(hw.fingertips)}, got {finger!r}")
+        self.surface = surface
+        self.home = np.asarray(hw.arm.home_pose, float)
+        self.R_tcp = rotvec_to_matrix(self.home[3:])
+        tip = np.asarray(hw.fingertips[finger], float)
+        fit = fit_ellipsoid(load_taxels())
+        pole_sensor = (fit.centre + np.array([0.0, 0.0, -fit.axes[2]])) * 1e-3
+        self.pad_offset = rotvec_to_matrix(tip[3:]) @ pole_sensor + tip[:3]       # TCP frame, m
+
+    def tcp_for_pad(self, pad_world) -> np.ndarray:
+        """TCP pose putting the pad's lowest point at ``pad_world`` (3,) m."""
+        return np.r_[np.asarray(pad_world, float) - self.R_tcp @ self.pad_offset, self.home[3:]]
+
+    def pad_of(self, pose) -> np.ndarray:
+        return np.asarray(pose[:3], float) + self.R_tcp @ self.pad_offset
+
+    def _surface(self, key: str) -> Surface:
+        if self.surface is None:
+            raise ProtocolError(key, "refers to the surface, but this run has none (set surface=...)")
+        return self.surface
+
+    def board_position(self, ref: str, margin_mm: float, key: str) -> float:
+        """Position along the board's sweep axis (m) of ``before:/after:<feature>`` or a centre."""
+        s = self._surface(key)
+        side, _, name = ref.rpartition(":")
+        if side not in ("", "before", "after"):
+            raise ProtocolError(key, f"expected before:<feature>, after:<feature> or <feature>, got {ref!r}")
+        names = {"first": 0, "last": len(s.features) - 1}
+        try:
+            feature = s.feature(names.get(name, name))
+        except (KeyError, IndexError, ValueError):
+            valid = [f.name for f in s.features] + ["first", "last"]
+            raise ProtocolError(key, f"the surface has no feature {name!r}; it has {valid}") from None
+        half = feature.width / 2 + margin_mm * 1e-3
+        return feature.u + {"": 0.0, "before": -half, "after": half}[side]
+
+    def pose_over(self, ref: str, margin_mm: float, height_mm: float, key: str) -> np.ndarray:
+        """TCP pose with the pad ``height_mm`` above the surface top at reference ``ref``."""
+        s = self._surface(key)
+        u = self.board_position(ref, margin_mm, key)
+        xy = s.origin[:2] + u * s.across[:2]
+        return self.tcp_for_pad([xy[0], xy[1], s.max_z + height_mm * 1e-3])
+
+    def pose_at_depth(self, pose, depth_mm: float) -> np.ndarray:
+        """``pose`` lowered or raised so the pad is ``depth_mm`` below the surface top."""
+        s = self._surface("approach")
+        pad = self.pad_of(pose)
+        pad[2] = s.max_z - depth_mm * 1e-3
+        return self.tcp_for_pad(pad)
+
+
+@dataclass
+class PlannedStep:
+    """One step of the timeline: where it starts (s), how long it is expected to take (s),
+    and the TCP waypoints it commands."""
+
+    index: int
+    step: Step
+    start: float
+    duration: float
+    waypoints: list[np.ndarray] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return f"{self.index:02d}_{self.step.kind}"
+
+
+class PlanContext(Geometry):
+    """The planner's running state: planned pose and time, parameters, limits."""
+
+    def __init__(self, hw, surface, params, limits: Limits):
+        super().__init__(hw, surface, params.finger)
+        self.params, self.limits = params, limits
+        self.pose = self.home.copy()
+        self.time = 0.0
+        self.pour_until = None
+        self.joint_names = set(JOINT_NAMES)
+
+    def linear(self, target, speed_mm_s: float, key: str):
+        """Plan a straight move at ``speed_mm_s``; check the target, speed and acceleration."""
+        speed = speed_mm_s * 1e-3
+        accel = self.params.accel * 1e-3
+        if not speed > 0:
+            raise ProtocolError(f"{key}.speed", f"expected a speed > 0 mm/s, got {speed_mm_s}")
+        if speed > self.limits.max_speed:
+            raise ProtocolError(f"{key}.speed", f"{speed_mm_s} mm/s exceeds the arm's limit "
+                                                f"hardware.arm.max_speed_m_s={self.limits.max_speed}")
+        if accel > self.limits.max_accel:
+            raise ProtocolError("protocol.accel", f"{self.params.accel} mm/s² exceeds the arm's limit "
+                                                  f"hardware.arm.max_accel_m_s2={self.limits.max_accel}")
+        self.check_reachable(target, key)
+        distance = float(np.linalg.norm(np.asarray(target[:3]) - self.pose[:3]))
+        duration = _trapezoid_time(distance, speed, accel)
+        self.pose = np.asarray(target, float).copy()
+        self.time += duration
+        return [self.pose.copy()], duration
+
+    def check_reachable(self, pose, key: str) -> None:
+        p = np.asarray(pose[:3], float)
+        lo, hi = self.limits.workspace_min, self.limits.workspace_max
+        for axis, name in enumerate("xyz"):
+            if p[axis] < lo[axis] or p[axis] > hi[axis]:
+                bound = ("min_m", lo[axis]) if p[axis] < lo[axis] else ("max_m", hi[axis])
+                raise ProtocolError(key, f"waypoint {np.round(p, 4).tolist()} m leaves the workspace envelope: "
+                                         f"{name} = {p[axis]:.4f} m is beyond hardware.workspace.{bound[0]}"
+                                         f"[{axis}] = {bound[1]} m")
+        if np.hypot(p[0], p[1]) > self.limits.reach:
+            raise ProtocolError(key, f"waypoint {np.round(p, 4).tolist()} m is out of the arm's reach "
+                                     f"({self.limits.reach} m from the base axis)")
+
+    def check_criterion(self, crit: Criterion | None, key: str) -> None:
+        if crit is None:
+            return
+        if crit.force is not None and not 0 < crit.force <= self.limits.max_force:
+            raise ProtocolError(f"{key}.force", f"expected a force in (0, {self.limits.max_force}] N "
+                                                f"(hardware.arm.max_contact_force_n), got {crit.force}")
+        for name in ("pdc_rise", "contact_lost"):
+            value = getattr(crit, name)
+            if value is not None and not value > 0:
+                raise ProtocolError(f"{key}.{name}", f"expected a threshold > 0 counts, got {value}")
+
+
+def _trapezoid_time(distance: float, speed: float, accel: float) -> float:
+    """Duration (s) of a rest-to-rest move with a trapezoidal (or triangular) speed profile."""
+    if distance <= 0:
+        return 0.0
+    if distance < speed ** 2 / accel:
+        return 2.0 * math.sqrt(distance / accel)
+    return distance / speed + speed / accel
+
+
+@dataclass
+class Plan:
+    protocol: str
+    steps: list[PlannedStep]
+    labels: list[str]
+
+    @property
+    def duration(self) -> float:
+        return self.steps[-1].start + self.steps[-1].duration if self.steps else 0.0
+
+
+def make_plan(cfg) -> Plan:
+    """Parse and check ``cfg.protocol`` against ``cfg.hardware`` and ``cfg.surface``.
+
+    Raises :class:`ProtocolError` (or the hardware's ``ConfigError``) naming the key at
+    fault; never touches hardware.
+    """
+    params = cfg.protocol
+    raw = OmegaConf.to_container(params.steps, resolve=True) if OmegaConf.is_config(params.steps) else params.steps
+    steps = parse_steps(raw)
+    surface = load_surface(cfg.surface) if cfg.get("surface") is not None else None
+    ctx = PlanContext(cfg.hardware, surface, params, Limits.from_hardware(cfg.hardware))
+    if params.finger not in cfg.hardware.fingers:
+        raise ProtocolError("protocol.finger", f"{params.finger!r} has no sensor in hardware.fingers "
+                                               f"{list(cfg.hardware.fingers)}")
+    planned: list[PlannedStep] = []
+
+    def walk(items):
+        for s in items:
+            if isinstance(s, Repeat):
+                s.plan(ctx)
+                for _ in range(s.times):
+                    walk(s.steps)
+                continue
+            start = ctx.time
+            waypoints, duration = s.plan(ctx)
+            planned.append(PlannedStep(len(planned), s, start, duration, waypoints))
+
+    walk(steps)
+    return Plan(protocol=params.name, steps=planned, labels=list(params.labels))
+
+
+def format_timeline(plan: Plan) -> str:
+    """The plan as a table: step, start, expected duration, parameters, waypoints."""
+    lines = [f"protocol {plan.protocol}: {len(plan.steps)} steps, expected {plan.duration:.1f} s; "
+             f"analysis labels: {', '.join(plan.labels) or '-'}",
+             f"{'#':>3}  {'step':<10} {'start s':>8} {'dur s':>7}  parameters / TCP waypoints (m)"]
+    for p in plan.steps:
+        lines.append(f"{p.index:>3}  {p.step.kind:<10} {p.start:>8.2f} {p.duration:>7.2f}  {p.step.describe()}")
+        for w in p.waypoints:
+            lines.append(f"{'':>33}→ [{w[0]:.4f}, {w[1]:.4f}, {w[2]:.4f}]")
+    return "\n".join(lines)

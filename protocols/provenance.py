@@ -1,0 +1,140 @@
+"""Provenance of a run: what ran, from which code, on which machine and hardware.
+
+:func:`collect` gathers it once at the start (JSON-serialisable values only); the engine
+passes it to :meth:`protocols.store.RunStore.create` (root attribute ``provenance``) and
+:func:`write_run_json` writes it, with the exit status and end time, to ``run.json`` beside
+the store — atomically, so a reader never sees a half-written file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.metadata
+import json
+import os
+import platform
+import socket
+import subprocess
+import sys
+import tempfile
+import uuid
+from pathlib import Path
+
+from .store import SCHEMA_VERSION, jsonable, utc_now
+
+UNKNOWN = "unknown"
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+
+
+def _git(root: Path, *args: str) -> bytes:
+    return subprocess.run(["git", "-C", str(root), *args], capture_output=True, check=True, timeout=20).stdout
+
+
+def git_state(root: Path = PROJECT_ROOT) -> dict:
+    """Commit, dirty flag (tracked files changed), SHA-256 of ``git diff HEAD`` and the number
+    of untracked files of the git checkout at ``root``; every value ``"unknown"`` if ``root``
+    is not the top of a git work tree (e.g. an installed wheel) or git is missing."""
+    try:
+        top = Path(_git(root, "rev-parse", "--show-toplevel").decode().strip()).resolve()
+        if top != root.resolve():
+            raise ValueError(f"{root} is inside {top}, not a checkout of this project")
+        commit = _git(root, "rev-parse", "HEAD").decode().strip()
+        diff = _git(root, "diff", "HEAD", "--binary")
+        untracked = _git(root, "ls-files", "--others", "--exclude-standard").decode().splitlines()
+    except (OSError, subprocess.SubprocessError, ValueError):
+        return {"commit": UNKNOWN, "dirty": UNKNOWN, "diff_sha256": UNKNOWN, "untracked_files": UNKNOWN}
+    return {"commit": commit, "dirty": bool(diff), "diff_sha256": hashlib.sha256(diff).hexdigest(),
+            "untracked_files": len(untracked)}
+
+
+def package_versions() -> dict[str, str]:
+    """Version of every installed distribution, by name (sorted)."""
+    out = {}
+    for d in importlib.metadata.distributions():
+        name = d.metadata["Name"]
+        if name:
+            out[name] = d.version
+    return dict(sorted(out.items(), key=lambda kv: kv[0].lower()))
+
+
+def _parse_config(config_yaml: str):
+    try:
+        import yaml
+        return yaml.safe_load(config_yaml)
+    except Exception:        # noqa: BLE001 - the text itself is always kept
+        return None
+
+
+def collect(config_yaml: str, overrides: list[str], hardware_identities: dict, calibration: dict,
+            seed, *, protocol: str | None = None, run_id: str | None = None) -> dict:
+    """Everything needed to reproduce the run, as JSON-serialisable values.
+
+    Args:
+        config_yaml: the full resolved config (e.g. ``OmegaConf.to_yaml(cfg, resolve=True)``).
+        overrides: the command-line overrides (``["protocol.sweep_speed=10", ...]``).
+        hardware_identities: ``{device: {model, serial_or_address, firmware}}`` (``lab.identities()``).
+        calibration: sensor calibration (taxel positions mm, baselines counts, ...); numpy ok.
+        seed: the run's random seed.
+    Returns a dict with ``run_id`` (UUID4 unless given), ``protocol``, ``start_time`` (ISO
+    8601 UTC), ``config_yaml``, ``config`` (parsed), ``overrides``, ``git``
+    (:func:`git_state`), ``python``, ``packages`` (:func:`package_versions`), ``host``,
+    ``platform``, ``hardware``, ``calibration``, ``seed``, ``schema_version``, ``command``.
+    """
+    return jsonable({
+        "run_id": run_id or str(uuid.uuid4()),
+        "protocol": protocol,
+        "start_time": utc_now(),
+        "config_yaml": config_yaml,
+        "config": _parse_config(config_yaml),
+        "overrides": list(overrides),
+        "git": git_state(),
+        "python": {"version": sys.version.split()[0], "implementation": platform.python_implementation(),
+                   "executable": sys.executable},
+        "packages": package_versions(),
+        "host": socket.gethostname(),
+        "platform": platform.platform(),
+        "hardware": hardware_identities,
+        "calibration": calibration,
+        "seed": seed,
+        "schema_version": SCHEMA_VERSION,
+        "command": list(sys.argv),
+    })
+
+
+def summary(provenance: dict) -> dict:
+    """What goes into the store's root attribute ``provenance``: everything :func:`collect`
+    gathered (a few kB: the package list and the calibration are the largest parts), so the
+    store alone is enough to reproduce the run; ``run.json`` adds the exit status."""
+    return jsonable(dict(provenance))
+
+
+def write_run_json(path, provenance: dict, status: str, end_time: str | None = None,
+                   extra: dict | None = None) -> Path:
+    """Write ``provenance`` plus ``status``, ``end_time`` (default: now) and ``extra`` (e.g. the
+    error) as JSON to ``path`` (a file, or a directory to hold ``run.json``), atomically: a
+    temporary file in the same directory, fsynced, then renamed over the target. Returns the
+    file's path."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "run.json"
+    doc = dict(provenance, **(extra or {}), status=status, end_time=end_time or utc_now())
+    text = json.dumps(jsonable(doc), indent=2, sort_keys=True, allow_nan=False)
+    fd, tmp = tempfile.mkstemp(prefix=".run.json.", suffix=".partial", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    try:                                # make the rename itself durable
+        dfd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+    except OSError:
+        pass
+    return path

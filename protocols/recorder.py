@@ -1,0 +1,460 @@
+"""The recorder: acquire every stream on its own thread, write the run store as data arrive.
+
+    store = RunStore.create(run_dir / "run.zarr", protocol="straws_sweep", fingers=lab.biotac.fingers)
+    sources = {"biotac": lab.biotac.read, "arm": lab.arm.read_states, "hand": lab.hand.read_states,
+               "pump": lab.pump.read_states, "scale": lab.scale.read}
+    with Recorder(store, sources, lab.clock) as rec:
+        rec.event("step_start", "sweep")
+        ...
+    # or rec.start() ... rec.stop("success", truth=lab.truth.to_dict())
+
+One acquisition thread per stream polls its device's non-blocking drain method every
+``poll_interval_s`` of the device clock (``clock.sleep``, so simulated time is respected)
+and queues the samples; a device error becomes a ``fault`` event and marks the stream
+stale, and the thread keeps retrying. A writer thread converts the queued samples to
+arrays, stamps them with the stream's clock model (:mod:`protocols.clockmodel`), appends
+them and commits the store every ``flush_interval_s`` of *wall* time, so a crash loses at
+most about that much. :meth:`Recorder.stop` drains every stream, flushes, refits each clock
+model on the whole run, rewrites the time coordinates and closes the store.
+
+Times in the store are seconds since run start: ``t0 = clock.now()`` at :meth:`start`,
+the same time base as every sample's ``host_time``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from hardware.biotac import PAC_RATE_HZ
+
+from .clockmodel import OnlineClockModel, latency_stats, sequence_gaps
+from .store import RunStore, utc_now
+
+log = logging.getLogger(__name__)
+
+STREAMS = ("biotac", "arm", "hand", "pump", "scale")
+_I16 = np.iinfo(np.int16)
+
+
+# ----------------------------------------------------------------------------- columns
+def _i16(a) -> np.ndarray:
+    """Counts as int16; values beyond int16 (only in corrupted frames, flagged invalid) are clipped."""
+    return np.clip(np.asarray(a), _I16.min, _I16.max).astype(np.int16)
+
+
+def biotac_columns(frames) -> dict[str, np.ndarray]:
+    """BioTac frames → (N,) seq, device_time, host_time (s, raw), valid; (N, F, 24) electrodes;
+    (N, F) pdc, tdc, tac (int16 counts)."""
+    return {"seq": np.array([f.seq for f in frames], np.int64),
+            "device_time": np.array([f.device_time for f in frames], float),
+            "host_time": np.array([f.host_time for f in frames], float),
+            "valid": np.array([f.is_valid() for f in frames], bool),
+            "electrodes": _i16([f.electrodes for f in frames]),
+            "pdc": _i16([f.pdc for f in frames]),
+            "tdc": _i16([f.tdc for f in frames]),
+            "tac": _i16([f.tac for f in frames])}
+
+
+def pac_columns(frames, rate_hz: float = PAC_RATE_HZ) -> dict[str, np.ndarray]:
+    """PAC samples of ``frames`` → (M, F) pac, (M,) device_time, host_time (s, raw).
+
+    A frame's n PAC samples are taken to end at the frame's timestamp, 1/rate apart:
+    sample k (0..n−1) at ``device_time − (n−1−k)/rate``; host_time is the frame's.
+    """
+    pac = [np.asarray(f.pac).T for f in frames]                       # (n, F) each
+    dt = [f.device_time - (len(p) - 1 - np.arange(len(p))) / rate_hz for f, p in zip(frames, pac)]
+    ht = [np.full(len(p), f.host_time) for f, p in zip(frames, pac)]
+    F = pac[0].shape[1] if pac else 0
+    return {"pac": _i16(np.concatenate(pac)) if pac else np.zeros((0, F), np.int16),
+            "device_time": np.concatenate(dt) if dt else np.zeros(0),
+            "host_time": np.concatenate(ht) if ht else np.zeros(0)}
+
+
+def arm_columns(states) -> dict[str, np.ndarray]:
+    return {"controller_time": np.array([s.controller_time for s in states], float),
+            "host_time": np.array([s.host_time for s in states], float),
+            "tcp_pose": np.array([s.tcp_pose for s in states], float).reshape(-1, 6),
+            "tcp_speed": np.array([s.tcp_speed for s in states], float).reshape(-1, 6),
+            "tcp_wrench": np.array([s.tcp_wrench for s in states], float).reshape(-1, 6),
+            "protective_stopped": np.array([s.protective_stopped for s in states], bool)}
+
+
+def hand_columns(states) -> dict[str, np.ndarray]:
+    return {"device_time": np.array([s.device_time for s in states], float),
+            "host_time": np.array([s.host_time for s in states], float),
+            "position": np.array([s.position for s in states], float),
+            "target": np.array([s.target for s in states], float)}
+
+
+def pump_columns(states) -> dict[str, np.ndarray]:
+    return {"pump_device_time": np.array([s.device_time for s in states], float),
+            "pump_host_time": np.array([s.host_time for s in states], float),
+            "pump_rate": np.array([s.rate_ml_min for s in states], float),
+            "dispensed": np.array([s.dispensed_ml for s in states], float),
+            "pump_running": np.array([s.running for s in states], bool)}
+
+
+def scale_columns(readings) -> dict[str, np.ndarray]:
+    return {"scale_device_time": np.array([r.device_time for r in readings], float),
+            "scale_host_time": np.array([r.host_time for r in readings], float),
+            "mass": np.array([r.mass_g for r in readings], float),
+            "stable": np.array([r.stable for r in readings], bool)}
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where a stream goes: its store block, its time coordinate and raw time columns."""
+
+    block: str
+    time: str
+    device: str
+    host: str
+    columns: Callable[[list], dict]
+
+
+LAYOUTS = {"biotac": Layout("biotac", "time", "device_time", "host_time", biotac_columns),
+           "arm": Layout("arm", "time_arm", "controller_time", "host_time", arm_columns),
+           "hand": Layout("hand", "time_hand", "device_time", "host_time", hand_columns),
+           "pump": Layout("pump", "time_pump", "pump_device_time", "pump_host_time", pump_columns),
+           "scale": Layout("scale", "time_scale", "scale_device_time", "scale_host_time", scale_columns)}
+PAC_LAYOUT = Layout("biotac_pac", "time_pac", "device_time", "host_time", pac_columns)
+
+
+# ----------------------------------------------------------------------------- state
+@dataclass
+class StreamStats:
+    """Counters of one stream (updated by its acquisition thread and the writer)."""
+
+    samples: int = 0
+    gaps: int = 0
+    missing: int = 0
+    invalid: int = 0
+    faults: int = 0
+    last_host_time: float | None = None
+    error: str | None = None                  # set while the source is failing
+    pending: list = field(default_factory=list)
+
+
+class Recorder:
+    """Acquire ``sources`` into ``store`` (see module docstring).
+
+    Args:
+        store: a freshly created :class:`RunStore` (the recorder closes it in :meth:`stop`).
+        sources: stream name (``biotac``, ``arm``, ``hand``, ``pump``, ``scale``) → the device's
+            non-blocking drain method (``lab.biotac.read``, ``lab.arm.read_states``, ...).
+        clock: the devices' :class:`~hardware.device.Clock` (``now()``, ``sleep()``).
+        flush_interval_s: wall-clock seconds between commits (the most a crash loses).
+        poll_interval_s: clock seconds between polls of a source.
+        retry_interval_s: clock seconds between retries of a failing source.
+        min_latency_s: known minimum transport latency per stream (s) subtracted by the
+            clock models (a float for every stream, or a dict); 0 keeps the receipt envelope.
+        clock_window_s: window of the clock model's lower envelope (device s).
+    """
+
+    def __init__(self, store: RunStore, sources: dict[str, Callable[[], list]], clock,
+                 flush_interval_s: float = 0.5, poll_interval_s: float = 0.01,
+                 retry_interval_s: float = 0.2, min_latency_s: float | dict = 0.0,
+                 clock_window_s: float = 1.0):
+        unknown = set(sources) - set(STREAMS)
+        if unknown:
+            raise ValueError(f"recorder: unknown stream(s) {sorted(unknown)}; expected some of {STREAMS}")
+        if not 0 < flush_interval_s <= 1.0:
+            raise ValueError(f"flush_interval_s: expected in (0, 1] s, got {flush_interval_s}")
+        self.store, self.sources, self.clock = store, dict(sources), clock
+        self.flush_interval_s = flush_interval_s
+        self.poll_interval_s = poll_interval_s
+        self.retry_interval_s = retry_interval_s
+        lat = min_latency_s if isinstance(min_latency_s, dict) else {s: min_latency_s for s in sources}
+        self.models = {s: OnlineClockModel(clock_window_s, min_latency_s=float(lat.get(s, 0.0)))
+                       for s in sources}
+        self._stats = {s: StreamStats() for s in sources}
+        self._events: list[tuple] = []
+        self._outbox: dict[str, list[dict]] = {}          # block -> column dicts not yet appended
+        self._last_seq: int | None = None                 # newest BioTac frame written
+        self._last_frame_time: float | None = None
+        self._lock = threading.Lock()                     # stats, pending samples, events
+        self._flush_lock = threading.Lock()               # one flush at a time
+        self._stopping = threading.Event()
+        self._writer_stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._writer: threading.Thread | None = None
+        self.t0: float | None = None
+        self.commit_wall_times: list[float] = []          # wall (monotonic) time of each commit
+        self.flush_durations: list[float] = []            # wall s per flush (convert+append+commit)
+        self.writer_error: BaseException | None = None
+        self.stopped = False
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> "Recorder":
+        """Set the run's time origin, start the acquisition threads and the writer."""
+        if self.t0 is not None:
+            raise RuntimeError("recorder already started")
+        self.t0 = float(self.clock.now())
+        self.store.set_attrs(t0_clock_s=self.t0, recording_start_time=utc_now(),
+                             streams_recorded=sorted(self.sources))
+        for name, source in self.sources.items():
+            t = threading.Thread(target=self._acquire, args=(name, source), name=f"rec-{name}", daemon=True)
+            t.start()
+            self._threads.append(t)
+        self._writer = threading.Thread(target=self._write_loop, name="rec-writer", daemon=True)
+        self._writer.start()
+        return self
+
+    def stop(self, status: str = "success", truth: dict | None = None, attrs: dict | None = None) -> dict:
+        """Drain every source, flush, refit the clock models, rewrite the time coordinates,
+        write ``truth`` (the simulator's ground truth, if given) and close the store with
+        ``status`` and ``attrs``. Returns :meth:`stats`. Idempotent."""
+        if self.stopped:
+            return self.stats()
+        if self.t0 is None:                       # never started: just close the store
+            self.store.close(status, **(attrs or {}))
+            self.stopped = True
+            return self.stats()
+        self._stopping.set()
+        for t in self._threads:
+            t.join()
+        self._writer_stop.set()
+        if self._writer is not None:
+            self._writer.join()
+        # every step is attempted so the store is closed whatever fails; the first error is re-raised
+        errors = []
+
+        def attempt(fn):
+            try:
+                return fn()
+            except Exception as e:               # noqa: BLE001
+                log.exception("recorder: %s failed while stopping", getattr(fn, "__name__", fn))
+                errors.append(e)
+
+        attempt(self._flush)
+        attempt(self._refit)
+        summary = attempt(self._summary) or {}
+        if truth is not None:
+            attempt(lambda: self.store.write_tree("truth", truth, attrs={
+                "long_name": "simulator ground truth",
+                "time_base": "simulated clock (s); subtract the root attribute t0_clock_s for time since run start"}))
+        extra = {"recorder_error": f"{type(errors[0]).__name__}: {errors[0]}"} if errors else {}
+        self.store.close(status, streams=summary, **extra, **(attrs or {}))
+        self.stopped = True
+        if errors:
+            raise errors[0]
+        return self.stats()
+
+    def __enter__(self) -> "Recorder":
+        return self.start()
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self.stopped:
+            return
+        if exc_type is None:
+            self.stop("success")
+        else:
+            if exc is not None:
+                self.event("fault", "exception", {"type": exc_type.__name__, "message": str(exc)})
+            self.stop("aborted" if issubclass(exc_type, KeyboardInterrupt) else "failed")
+
+    # ------------------------------------------------------------------ engine API
+    def now(self) -> float:
+        """Seconds since run start (the store's time base)."""
+        return float(self.clock.now()) - self._require_started()
+
+    def event(self, kind: str, name: str, detail=None) -> None:
+        """Record an event now (thread-safe). ``detail``: anything JSON-serialisable."""
+        t = self.now()
+        with self._lock:
+            self._events.append((t, kind, name, detail))
+
+    def last_sample_age(self, stream: str) -> float:
+        """Clock seconds since the newest sample of ``stream`` was received (since the start
+        if none yet)."""
+        st = self._stats[stream]
+        ref = st.last_host_time if st.last_host_time is not None else self._require_started()
+        return max(0.0, float(self.clock.now()) - ref)
+
+    def stale_streams(self, max_age_s: float | None = None) -> set[str]:
+        """Streams whose source is failing, or (with ``max_age_s``) whose newest sample is older."""
+        return {s for s, st in self._stats.items()
+                if st.error is not None or (max_age_s is not None and self.last_sample_age(s) > max_age_s)}
+
+    def stats(self) -> dict[str, dict]:
+        """Per stream: samples, gaps, missing, invalid, faults, error, last_sample_age_s."""
+        with self._lock:
+            out = {s: {"samples": st.samples, "gaps": st.gaps, "missing": st.missing, "invalid": st.invalid,
+                       "faults": st.faults, "error": st.error} for s, st in self._stats.items()}
+        if self.t0 is not None:
+            for s in out:
+                out[s]["last_sample_age_s"] = self.last_sample_age(s)
+        return out
+
+    def newest_sample_time(self, stream: str) -> float | None:
+        """Host receipt time (s since run start) of the newest sample received, or None."""
+        h = self._stats[stream].last_host_time
+        return None if h is None or self.t0 is None else h - self.t0
+
+    def _require_started(self) -> float:
+        if self.t0 is None:
+            raise RuntimeError("recorder not started")
+        return self.t0
+
+    # ------------------------------------------------------------------ acquisition
+    def _acquire(self, name: str, source) -> None:
+        st = self._stats[name]
+        while True:
+            last = self._stopping.is_set()       # one more drain after stop is requested
+            try:
+                samples = source()
+            except Exception as e:               # noqa: BLE001 - any device error is recorded
+                self._on_fault(name, e)
+                if last:
+                    return
+                self.clock.sleep(self.retry_interval_s)
+                continue
+            with self._lock:
+                if samples:
+                    st.pending.extend(samples)
+                    st.samples += len(samples)
+                    st.last_host_time = float(samples[-1].host_time)
+                if st.error is not None:
+                    self._events.append((self.now(), "info", name, {"message": f"{name}: source recovered"}))
+                    st.error = None
+            if last:
+                return
+            self.clock.sleep(self.poll_interval_s)
+
+    def _on_fault(self, name: str, e: Exception) -> None:
+        msg = f"{type(e).__name__}: {e}"
+        with self._lock:
+            st = self._stats[name]
+            if st.error == msg:
+                return                            # same error again: one event per failure streak
+            st.error = msg
+            st.faults += 1
+            self._events.append((self.now(), "fault", name, {"error": type(e).__name__, "message": str(e)}))
+        log.warning("recorder: %s source failed: %s", name, msg)
+
+    # ------------------------------------------------------------------ writing
+    def _write_loop(self) -> None:
+        # deadlines from the previous flush's start, so a slow flush does not add to the interval
+        due = time.monotonic() + self.flush_interval_s
+        while not self._writer_stop.wait(max(0.0, due - time.monotonic())):
+            due = time.monotonic() + self.flush_interval_s
+            try:
+                self._flush()
+            except Exception as e:               # noqa: BLE001 - keep the samples, retry next time
+                self.writer_error = e
+                log.exception("recorder: flush failed (samples kept for the next flush)")
+
+    def _flush(self) -> None:
+        """Convert every queued sample and event to columns, append them, commit."""
+        with self._flush_lock:
+            w0 = time.monotonic()
+            with self._lock:
+                taken = {s: st.pending for s, st in self._stats.items()}
+                for st in self._stats.values():
+                    st.pending = []
+            for name, samples in taken.items():
+                if samples:
+                    self._convert(name, samples)
+            with self._lock:
+                events, self._events = self._events, []
+            if events:
+                self._outbox.setdefault("events", []).append(_event_columns(events))
+            if self._outbox:
+                self.store.append_many({b: _concat(c) for b, c in self._outbox.items()})
+                self._outbox = {}          # kept for the next flush if the append failed
+            self.store.commit()
+            self.commit_wall_times.append(time.monotonic())
+            self.flush_durations.append(time.monotonic() - w0)
+
+    def _convert(self, name: str, samples: list) -> None:
+        lay = LAYOUTS[name]
+        cols = lay.columns(samples)
+        model = self.models[name]
+        model.update(cols[lay.device], cols[lay.host])
+        self._stamp(cols, lay, model)
+        self._outbox.setdefault(lay.block, []).append(cols)
+        if name == "biotac":
+            pac = pac_columns(samples)
+            self._stamp(pac, PAC_LAYOUT, model)
+            self._outbox.setdefault(PAC_LAYOUT.block, []).append(pac)
+            self._check_frames(cols)
+
+    def _stamp(self, cols: dict, lay: Layout, model: OnlineClockModel) -> None:
+        cols[lay.time] = model.map(cols[lay.device]) - self.t0
+        cols[lay.host] = cols[lay.host] - self.t0
+
+    def _check_frames(self, cols: dict) -> None:
+        """Count and record sequence gaps and invalid frames as events."""
+        st = self._stats["biotac"]
+        events = []
+        for i, before, missing in sequence_gaps(cols["seq"], self._last_seq):
+            detail = {"after_seq": before, "next_seq": int(cols["seq"][i]), "missing": missing}
+            prev_t = cols["time"][i - 1] if i > 0 else self._last_frame_time
+            if prev_t is not None:
+                detail["gap_s"] = float(cols["time"][i] - prev_t)
+            events.append((float(cols["time"][i]), "gap", "biotac", detail))
+            if missing > 0:
+                st.gaps += 1
+                st.missing += missing
+        self._last_seq = int(cols["seq"][-1])
+        self._last_frame_time = float(cols["time"][-1])
+        bad = np.flatnonzero(~cols["valid"])
+        for i in bad:
+            events.append((float(cols["time"][i]), "invalid", "biotac", {"seq": int(cols["seq"][i])}))
+        with self._lock:
+            st.invalid += len(bad)
+            self._events.extend(events)
+
+    # ------------------------------------------------------------------ close
+    def _refit(self) -> None:
+        """Final clock-model fit on the whole run; rewrite every time coordinate with it."""
+        for name, model in self.models.items():
+            fit = model.final()
+            if fit is None:
+                continue
+            for lay in (LAYOUTS[name], PAC_LAYOUT) if name == "biotac" else (LAYOUTS[name],):
+                self.store.transform(lay.block, lay.time, lay.device, lambda d, fit=fit: fit(d) - self.t0)
+        self.store.commit()
+
+    def _summary(self) -> dict:
+        """Per-stream clock model and counters for the store attributes (JSON values)."""
+        out = {}
+        for name, st in self.stats().items():
+            entry = {k: st[k] for k in ("samples", "gaps", "missing", "invalid", "faults")}
+            fit = self.models[name].current()
+            if fit is not None:
+                lay = LAYOUTS[name]
+                step = max(1, self.store.length(lay.block) // 100_000)      # bounded memory
+                d = self.store.read(lay.block, lay.device, step)
+                h = self.store.read(lay.block, lay.host, step) + self.t0
+                entry["clock_model"] = {"offset_s": fit.offset_s, "drift_ppm": fit.drift * 1e6,
+                                        "windows": fit.n_windows, "windows_used": fit.n_used,
+                                        "min_latency_s": self.models[name].min_latency_s,
+                                        "residual_latency": latency_stats(fit, d, h)}
+            out[name] = entry
+            group = self.store.schema[LAYOUTS[name].block].group
+            self.store.set_group_attrs(group, **{f"{name}_stream": entry} if group == "pour" else {"stream": entry})
+        return out
+
+
+def _event_columns(events: list[tuple]) -> dict[str, np.ndarray]:
+    return {"time": np.array([e[0] for e in events], float),
+            "kind": np.array([str(e[1]) for e in events], dtype=object),
+            "name": np.array([str(e[2]) for e in events], dtype=object),
+            "detail": np.array(["" if e[3] is None else json.dumps(e[3], default=str) for e in events],
+                               dtype=object)}
+
+
+def _concat(cols: list[dict]) -> dict[str, np.ndarray]:
+    if len(cols) == 1:
+        return cols[0]
+    return {k: np.concatenate([c[k] for c in cols]) for k in cols[0]}
+
+

@@ -1,0 +1,102 @@
+"""One run, start to end: plan check, lab, recording, engine, provenance, hand-off.
+
+:func:`run_protocol` is what ``tactile-run`` calls for every job; tests call it directly.
+The hand-off to the analysis pipeline goes through the ``tactile_flow.analysis`` entry
+point with the path of the run store: ``protocols`` never imports ``analysis``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from pathlib import Path
+
+from omegaconf import OmegaConf
+from tqdm import tqdm
+
+from . import provenance
+from .engine import FAILED, Outcome, RunEngine
+from .lab import make_lab
+from .plan import Plan, format_timeline, make_plan
+from .recorder import Recorder
+from .store import RunStore, utc_now
+
+ANALYSIS_ENTRY_POINTS = "tactile_flow.analysis"
+
+
+@dataclass
+class RunResult:
+    """What a run left behind. ``status``: success | aborted | failed | planned."""
+
+    status: str
+    run_dir: Path
+    plan: Plan
+    store: Path | None = None
+    error: str | None = None
+    stats: dict = field(default_factory=dict)
+    analysis: dict | None = None
+
+
+def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
+    """Check the plan, then (unless ``cfg.plan_only``) run it on ``cfg.hardware``.
+
+    Bad config or protocol raises ``ValueError`` (``ProtocolError``/``ConfigError``, naming
+    the key) before any hardware is touched. A run that starts always ends with a closed
+    store and ``run.json``, whatever its status.
+    """
+    run_dir = Path(run_dir)
+    plan = make_plan(cfg)
+    if cfg.plan_only:
+        console(format_timeline(plan))
+        return RunResult("planned", run_dir, plan)
+
+    lab = make_lab(cfg)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    store_path = run_dir / "run.zarr"
+    with lab:
+        prov = provenance.collect(OmegaConf.to_yaml(cfg, resolve=True), list(overrides), lab.identities(),
+                                  _calibration(lab), cfg.hardware.get("seed"), protocol=plan.protocol)
+        store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
+                                run_id=prov["run_id"], provenance=provenance.summary(prov),
+                                attrs={"labels": plan.labels, "plan_duration_s": plan.duration})
+        recorder = Recorder(store, {"biotac": lab.biotac.read, "arm": lab.arm.read_states,
+                                    "hand": lab.hand.read_states, "pump": lab.pump.read_states,
+                                    "scale": lab.scale.read}, lab.clock).start()
+        outcome = Outcome(FAILED, "the run engine could not start")
+        try:
+            outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=_bars(cfg.progress), log=console).run()
+        finally:
+            truth = lab.truth.to_dict() if getattr(lab, "truth", None) is not None else None
+            stats = recorder.stop(outcome.status, truth=truth, attrs={"error": outcome.error})
+            provenance.write_run_json(run_dir / "run.json", prov, status=outcome.status, end_time=utc_now(),
+                                      extra={"error": outcome.error, "store": store_path.name})
+    return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)
+
+
+def hand_off(result: RunResult, analysis_cfg, console=print) -> dict | None:
+    """Give the run store to the analysis pipeline registered as an entry point."""
+    found = entry_points(group=ANALYSIS_ENTRY_POINTS)
+    if not found:
+        console("analysis: no analysis pipeline installed; skipped")
+        return None
+    analyze = next(iter(found)).load()
+    return analyze(result.store, analysis_cfg)
+
+
+def _calibration(lab) -> dict:
+    from tactile.geometry import load_taxels
+    baselines = getattr(lab.biotac, "calibration", {}) or {}
+    return {"taxels_mm": load_taxels().tolist(),
+            "baseline_counts": {f: [float(x) for x in v] for f, v in baselines.items()}}
+
+
+def _bars(enabled: bool):
+    """A progress bar per step, over its expected duration (clock seconds)."""
+    if not enabled:
+        return None
+
+    def make(planned):
+        return tqdm(total=round(max(planned.duration, 0.01), 2), unit="s", leave=False, dynamic_ncols=True,
+                    desc=f"step {planned.index:02d} {planned.step.kind:<8}",
+                    bar_format="{desc} {percentage:3.0f}%|{bar:24}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}]")
+    return make

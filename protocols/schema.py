@@ -1,0 +1,59 @@
+"""Typed configuration schemas, registered in Hydra's ConfigStore.
+
+``conf/config.yaml`` starts its defaults list with ``run_schema`` (:class:`RunConfig`), so
+every key of the composed config is checked against these dataclasses before anything
+runs: an unknown key or a value of the wrong type is a composition error naming the key.
+The ``hardware`` and ``surface`` groups are validated by their own schemas when the lab
+is built (:func:`protocols.lab.check_hardware`), also before anything moves.
+
+Protocol units are the ones a researcher writes: mm, mm/s, mm/s², s, N, ml, ml/min, rad.
+They are converted to the robot's SI units (m, m/s) at the hardware boundary.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import MISSING
+
+
+@dataclass
+class ProtocolConfig:
+    """A protocol: its parameters (referenced by the steps as ``${protocol.<name>}``),
+    the segment labels its analysis should produce, and its steps."""
+
+    name: str = MISSING
+    description: str = ""
+    labels: list[str] = field(default_factory=list)
+    finger: str = "ff"                 # the finger that touches the surface in sweeps
+    sweep_speed: float = 10.0          # mm/s
+    sweep_depth: float = 1.5           # mm, pad below the top of the tallest feature
+    approach_speed: float = 5.0        # mm/s
+    travel_speed: float = 50.0         # mm/s, moves out of contact
+    accel: float = 500.0               # mm/s², linear moves
+    pour_rate: float = 60.0            # ml/min
+    pour_volume: float = 400.0         # ml, the most the pour step may dispense
+    grasp_flexion: float = 1.2         # rad, summed over the two flexion joints of each finger
+    hold_time: float = 1.0             # s
+    steps: list[Any] = field(default_factory=list)
+
+
+@dataclass
+class RunConfig:
+    """The whole run: protocol, hardware, surface, analysis and run options."""
+
+    protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
+    hardware: Any = MISSING
+    surface: Any = None
+    analysis: Any = field(default_factory=dict)
+    plan_only: bool = False            # expand and check the plan, print it, touch no hardware
+    analyze: bool = True               # hand the run to the analysis pipeline when it ends
+    verbose: bool = False              # tracebacks on errors
+    progress: bool = True              # progress bars on the console
+    resume: bool = False               # (multirun) skip jobs whose runs already succeeded
+
+
+def register() -> None:
+    ConfigStore.instance().store(name="run_schema", node=RunConfig)

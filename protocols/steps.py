@@ -1,0 +1,415 @@
+"""The step vocabulary of protocols: one small dataclass per step kind.
+
+A protocol's ``steps`` is a YAML list of one-key mappings, ``- sweep: {speed: 10}``.
+:func:`parse_steps` turns it into step objects, checking every key and type and naming
+the YAML key at fault (``protocol.steps[2].sweep.speed``). Each step class knows how to
+
+- ``plan(ctx)``: advance the planned TCP pose and time, returning its waypoints and
+  expected duration, so the whole protocol can be checked before anything moves;
+- ``run(ctx)``: execute against the hardware interfaces (see :mod:`protocols.engine`).
+
+Adding a step kind is one class here with its fields, ``plan`` and ``run``, decorated
+with :func:`step`. Units are the protocol's: mm, mm/s, s, N, ml, ml/min, rad.
+
+Surface references (``at``/``to``): ``before:<feature>``, ``after:<feature>``, or
+``<feature>`` (its centre), where ``<feature>`` is ``feature_<i>``, ``first`` or ``last``;
+"before" and "after" are along the board's sweep axis (its local x, across the features),
+``margin`` mm outside the feature's edge. ``home`` is the arm's home pose.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+
+class ProtocolError(ValueError):
+    """A protocol that cannot run as written; ``key`` is the YAML key at fault."""
+
+    def __init__(self, key: str, message: str):
+        self.key = key
+        super().__init__(f"{key}: {message}")
+
+
+STEP_KINDS: dict[str, type[Step]] = {}
+
+
+def step(cls):
+    """Register a step class under its ``kind``."""
+    STEP_KINDS[cls.kind] = cls
+    return cls
+
+
+@dataclass
+class Criterion:
+    """When a waiting step ends early. Any key that is set must hold.
+
+    ``pdc_rise``: PDC of the protocol's finger this many counts above its tare value.
+    ``contact_lost``: every grasp finger's PDC back within this many counts of its tare.
+    ``force``: TCP force magnitude above this many newtons.
+    """
+
+    pdc_rise: float | None = None
+    contact_lost: float | None = None
+    force: float | None = None
+
+    def describe(self) -> str:
+        return ", ".join(f"{k}={v}" for k, v in dataclasses.asdict(self).items() if v is not None) or "none"
+
+
+@dataclass
+class Step:
+    """Base class. ``key`` is this step's YAML key, for messages."""
+
+    kind: ClassVar[str] = ""
+    key: str = field(default="", repr=False)
+
+    def plan(self, ctx) -> tuple[list[np.ndarray], float]:
+        """Advance ``ctx`` (a :class:`protocols.plan.PlanContext`); return (waypoints, seconds)."""
+        return [], 0.0
+
+    def run(self, ctx) -> None:  # pragma: no cover - every step overrides it
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "key"}
+        return ", ".join(f"{k}={_short(v)}" for k, v in fields.items() if v is not None)
+
+
+def _short(v):
+    if isinstance(v, Criterion):
+        return "{" + v.describe() + "}"
+    if isinstance(v, list) and v and isinstance(v[0], Step):
+        return f"[{len(v)} steps]"
+    return v
+
+
+# ----------------------------------------------------------------------------- motion
+
+
+@step
+@dataclass
+class MoveTo(Step):
+    """Move the TCP in a straight line to a surface reference or a pose, out of contact.
+
+    ``at``: a surface reference (see the module docstring) or ``home``; ``height``: mm of
+    the finger's pad above the top of the tallest feature; ``pose``: an explicit TCP pose
+    ``[x, y, z, rx, ry, rz]`` (m, rad, as ur_rtde) instead of ``at``.
+    """
+
+    kind: ClassVar[str] = "move_to"
+    at: str | None = None
+    pose: list[float] | None = None
+    height: float = 10.0
+    margin: float = 15.0
+    speed: float | None = None
+
+    def target(self, ctx) -> np.ndarray:
+        if self.pose is not None:
+            if len(self.pose) != 6:
+                raise ProtocolError(f"{self.key}.pose", f"expected 6 numbers [x,y,z,rx,ry,rz], got {self.pose}")
+            return np.asarray(self.pose, float)
+        if self.at is None:
+            raise ProtocolError(self.key, "expected `at` (a surface reference or home) or `pose`")
+        if self.at == "home":
+            return ctx.home.copy()
+        return ctx.pose_over(self.at, self.margin, self.height, f"{self.key}.at")
+
+    def plan(self, ctx):
+        return ctx.linear(self.target(ctx), self.speed or ctx.params.travel_speed, self.key)
+
+    def run(self, ctx):
+        ctx.move(self.target(ctx), self.speed or ctx.params.travel_speed)
+
+
+@step
+@dataclass
+class Approach(Step):
+    """Lower the finger to ``depth`` mm below the tallest feature's top at ``speed``,
+    stopping early when ``until`` holds (e.g. a PDC rise: the first contact)."""
+
+    kind: ClassVar[str] = "approach"
+    depth: float = 1.5
+    speed: float | None = None
+    until: Criterion | None = None
+
+    def target(self, ctx) -> np.ndarray:
+        return ctx.pose_at_depth(ctx.pose, self.depth)
+
+    def plan(self, ctx):
+        ctx.check_criterion(self.until, f"{self.key}.until")
+        return ctx.linear(self.target(ctx), self.speed or ctx.params.approach_speed, self.key)
+
+    def run(self, ctx):
+        ctx.move(self.target(ctx), self.speed or ctx.params.approach_speed, until=self.until)
+
+
+@step
+@dataclass
+class Sweep(Step):
+    """Slide the finger at constant ``speed`` and height to a surface reference ``to``."""
+
+    kind: ClassVar[str] = "sweep"
+    to: str = "after:last"
+    speed: float | None = None
+    margin: float = 15.0
+
+    def target(self, ctx) -> np.ndarray:
+        goal = ctx.pose_over(self.to, self.margin, 0.0, f"{self.key}.to")
+        goal[2] = ctx.pose[2]                              # keep the hold depth
+        return goal
+
+    def plan(self, ctx):
+        return ctx.linear(self.target(ctx), self.speed or ctx.params.sweep_speed, self.key)
+
+    def run(self, ctx):
+        ctx.event("sweep", self.key, {"speed_mm_s": self.speed or ctx.params.sweep_speed, "to": self.to})
+        ctx.move(self.target(ctx), self.speed or ctx.params.sweep_speed)
+
+
+@step
+@dataclass
+class Lift(Step):
+    """Raise the TCP straight up by ``height`` mm."""
+
+    kind: ClassVar[str] = "lift"
+    height: float = 20.0
+    speed: float | None = None
+
+    def target(self, ctx) -> np.ndarray:
+        goal = ctx.pose.copy()
+        goal[2] += self.height * 1e-3
+        return goal
+
+    def plan(self, ctx):
+        return ctx.linear(self.target(ctx), self.speed or ctx.params.travel_speed, self.key)
+
+    def run(self, ctx):
+        ctx.move(self.target(ctx), self.speed or ctx.params.travel_speed)
+
+
+# ----------------------------------------------------------------------------- hand
+
+
+@step
+@dataclass
+class Grasp(Step):
+    """Close the hand: each of ``fingers`` flexes its two distal joints by ``flexion`` rad in
+    total, over ``duration`` s; or move the named ``joints`` (rad) explicitly."""
+
+    kind: ClassVar[str] = "grasp"
+    fingers: list[str] = field(default_factory=lambda: ["ff", "mf", "th"])
+    flexion: float | None = None
+    joints: dict[str, float] | None = None
+    duration: float = 1.0
+
+    def targets(self, ctx) -> dict[str, float]:
+        if self.joints:
+            unknown = [j for j in self.joints if j not in ctx.joint_names]
+            if unknown:
+                raise ProtocolError(f"{self.key}.joints", f"unknown joint(s) {unknown}; expected Shadow "
+                                                          f"names such as rh_FFJ3")
+            return dict(self.joints)
+        flexion = ctx.params.grasp_flexion if self.flexion is None else self.flexion
+        targets = {}
+        for i, f in enumerate(self.fingers):
+            if f not in FLEX_JOINTS:
+                raise ProtocolError(f"{self.key}.fingers[{i}]", f"expected one of {list(FLEX_JOINTS)}, got {f!r}")
+            targets.update({j: flexion / 2 for j in FLEX_JOINTS[f]})
+        return targets
+
+    def plan(self, ctx):
+        self.targets(ctx)
+        _positive(self.duration, f"{self.key}.duration")
+        ctx.time += self.duration
+        return [], self.duration
+
+    def run(self, ctx):
+        ctx.lab.hand.move_to(self.targets(ctx), self.duration, wait=False)
+        ctx.wait(self.duration)
+
+
+@step
+@dataclass
+class Release(Step):
+    """Open the hand: every flexion joint back to 0 over ``duration`` s."""
+
+    kind: ClassVar[str] = "release"
+    duration: float = 1.0
+
+    def plan(self, ctx):
+        _positive(self.duration, f"{self.key}.duration")
+        ctx.time += self.duration
+        return [], self.duration
+
+    def run(self, ctx):
+        ctx.lab.pump.stop()
+        ctx.lab.hand.move_to({j: 0.0 for joints in FLEX_JOINTS.values() for j in joints},
+                             self.duration, wait=False)
+        ctx.wait(self.duration)
+
+
+# The two distal flexion joints of each finger (J1 and J2 are coupled on the real hand).
+FLEX_JOINTS = {"ff": ("rh_FFJ2", "rh_FFJ3"), "mf": ("rh_MFJ2", "rh_MFJ3"), "rf": ("rh_RFJ2", "rh_RFJ3"),
+               "lf": ("rh_LFJ2", "rh_LFJ3"), "th": ("rh_THJ2", "rh_THJ5")}
+
+
+# ----------------------------------------------------------------------------- pour and waiting
+
+
+@step
+@dataclass
+class Pour(Step):
+    """Start the pump at ``rate`` ml/min, to dispense at most ``volume`` ml; returns at once
+    (a following ``hold`` waits). The pump is stopped on every exit path of the run."""
+
+    kind: ClassVar[str] = "pour"
+    rate: float | None = None
+    volume: float | None = None
+
+    def plan(self, ctx):
+        rate = ctx.params.pour_rate if self.rate is None else self.rate
+        volume = ctx.params.pour_volume if self.volume is None else self.volume
+        _positive(rate, f"{self.key}.rate")
+        _positive(volume, f"{self.key}.volume")
+        if rate > ctx.limits.max_pump_rate:
+            raise ProtocolError(f"{self.key}.rate", f"{rate} ml/min exceeds the pump's limit "
+                                                    f"hardware.pump.max_rate_ml_min={ctx.limits.max_pump_rate}")
+        ctx.pour_until = ctx.time + volume / rate * 60.0
+        return [], 0.0
+
+    def run(self, ctx):
+        rate = ctx.params.pour_rate if self.rate is None else self.rate
+        volume = ctx.params.pour_volume if self.volume is None else self.volume
+        ctx.event("pour", self.key, {"rate_ml_min": rate, "volume_ml": volume})
+        ctx.lab.pump.dispense(volume, rate)
+
+
+@step
+@dataclass
+class Hold(Step):
+    """Keep still for ``duration`` s, or until ``until`` holds (then end early)."""
+
+    kind: ClassVar[str] = "hold"
+    duration: float | None = None
+    until: Criterion | None = None
+
+    def plan(self, ctx):
+        duration = ctx.params.hold_time if self.duration is None else self.duration
+        _positive(duration, f"{self.key}.duration")
+        ctx.check_criterion(self.until, f"{self.key}.until")
+        ctx.time += duration
+        return [], duration
+
+    def run(self, ctx):
+        duration = ctx.params.hold_time if self.duration is None else self.duration
+        met = ctx.wait(duration, until=self.until)
+        if self.until is not None:
+            ctx.event("criterion" if met else "timeout", self.key, {"until": self.until.describe()})
+
+
+@step
+@dataclass
+class Wait(Step):
+    """Do nothing for ``duration`` s (streams keep recording)."""
+
+    kind: ClassVar[str] = "wait"
+    duration: float = 1.0
+
+    def plan(self, ctx):
+        _positive(self.duration, f"{self.key}.duration")
+        ctx.time += self.duration
+        return [], self.duration
+
+    def run(self, ctx):
+        ctx.wait(self.duration)
+
+
+@step
+@dataclass
+class Repeat(Step):
+    """Run ``steps`` ``times`` times."""
+
+    kind: ClassVar[str] = "repeat"
+    times: int = 1
+    steps: list[Step] = field(default_factory=list)
+
+    def plan(self, ctx):
+        if self.times < 1:
+            raise ProtocolError(f"{self.key}.times", f"expected an integer ≥ 1, got {self.times}")
+        return [], 0.0                                  # expanded by the planner
+
+    def run(self, ctx):  # pragma: no cover - the engine runs the expanded steps
+        raise AssertionError("repeat is expanded before running")
+
+
+def _positive(value, key: str) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise ProtocolError(key, f"expected a number > 0, got {value!r}")
+
+
+# ----------------------------------------------------------------------------- parsing
+
+
+def parse_steps(items, key: str = "protocol.steps") -> list[Step]:
+    """YAML list of ``{kind: {params}}`` → step objects, every key and type checked."""
+    if not isinstance(items, list) or not items:
+        raise ProtocolError(key, "expected a non-empty list of steps")
+    return [parse_step(item, f"{key}[{i}]") for i, item in enumerate(items)]
+
+
+def parse_step(item, key: str) -> Step:
+    if not isinstance(item, dict) or len(item) != 1:
+        raise ProtocolError(key, f"expected one step as `- <kind>: {{params}}` with kind one of "
+                                 f"{sorted(STEP_KINDS)}, got {item!r}")
+    (kind, params), = item.items()
+    if kind not in STEP_KINDS:
+        raise ProtocolError(key, f"unknown step kind {kind!r}; expected one of {sorted(STEP_KINDS)}")
+    cls = STEP_KINDS[kind]
+    key = f"{key}.{kind}"
+    params = {} if params is None else params
+    if not isinstance(params, dict):
+        raise ProtocolError(key, f"expected a mapping of parameters, got {params!r}")
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.name != "key"}
+    unknown = sorted(set(params) - set(fields))
+    if unknown:
+        raise ProtocolError(f"{key}.{unknown[0]}", f"unknown parameter; {kind} takes {sorted(fields)}")
+    values = {name: _convert(value, fields[name].type, f"{key}.{name}") for name, value in params.items()}
+    if kind == "repeat":
+        values["steps"] = parse_steps(params.get("steps"), f"{key}.steps")
+    return cls(key=key, **values)
+
+
+_SCALARS = {"float": (int, float), "int": (int,), "str": (str,), "bool": (bool,)}
+
+
+def _convert(value, annotation: str, key: str) -> Any:
+    """Check ``value`` against a field annotation written as a string (``float | None``...)."""
+    options = [a.strip() for a in str(annotation).split("|")]
+    if value is None:
+        if "None" in options:
+            return None
+        raise ProtocolError(key, f"expected {annotation}, got null")
+    for opt in options:
+        if opt in _SCALARS and isinstance(value, _SCALARS[opt]) and not (opt != "bool" and isinstance(value, bool)):
+            return float(value) if opt == "float" else value
+        if opt == "Criterion" and isinstance(value, dict):
+            names = {f.name for f in dataclasses.fields(Criterion)}
+            unknown = sorted(set(value) - names)
+            if unknown:
+                raise ProtocolError(f"{key}.{unknown[0]}", f"unknown criterion; expected one of {sorted(names)}")
+            if not value:
+                raise ProtocolError(key, f"expected at least one criterion of {sorted(names)}")
+            return Criterion(**{k: _convert(v, "float", f"{key}.{k}") for k, v in value.items()})
+        if opt.startswith("list[") and isinstance(value, list):
+            inner = opt[5:-1]
+            if inner == "Step":
+                return value                               # parsed by the caller (repeat)
+            return [_convert(v, inner, f"{key}[{i}]") for i, v in enumerate(value)]
+        if opt.startswith("dict[") and isinstance(value, dict):
+            return {str(k): _convert(v, "float", f"{key}.{k}") for k, v in value.items()}
+    raise ProtocolError(key, f"expected {annotation.replace('None', 'null')}, got {value!r}")

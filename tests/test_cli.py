@@ -1,0 +1,149 @@
+"""tactile-run end to end: a real Hydra run in a subprocess, multirun, bad input, SIGKILL."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+FAST = ["analyze=false", "progress=false"]
+
+
+def tactile_run(tmp_path, *args, timeout=240):
+    env = {**os.environ, "HYDRA_FULL_ERROR": "0"}
+    return subprocess.run([sys.executable, "-c", "from protocols.cli import main; main()", *args],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=timeout, env=env)
+
+
+def run_dirs(root: Path):
+    return sorted(p.parent for p in root.rglob("run.json"))
+
+
+def test_default_run_leaves_a_complete_store(tmp_path):
+    proc = tactile_run(tmp_path, *FAST)
+    assert proc.returncode == 0, proc.stderr
+    (run,) = run_dirs(tmp_path / "outputs")
+    assert f"run {run}: success" in proc.stdout
+    tree = xr.open_datatree(run / "run.zarr", engine="zarr")
+    assert {"biotac", "biotac_pac", "arm", "hand", "pour", "events", "truth"} <= set(tree.children)
+    assert tree.attrs["status"] == "success" and tree.attrs["protocol"] == "straws_sweep"
+    for group in ("biotac", "arm", "hand"):
+        for name, var in tree[group].data_vars.items():
+            assert var.attrs.get("units") is not None and var.attrs.get("long_name"), (group, name)
+    info = json.loads((run / "run.json").read_text())
+    for key in ("run_id", "config", "overrides", "git", "python", "packages", "host", "hardware", "calibration", "seed",
+                "start_time", "end_time", "status"):
+        assert key in info, key
+    assert info["run_id"] == tree.attrs["run_id"]
+    assert (run / ".hydra" / "config.yaml").exists()
+
+
+def test_plan_only_prints_the_timeline_and_touches_nothing(tmp_path):
+    proc = tactile_run(tmp_path, "plan_only=true", "protocol=pour_grasp")
+    assert proc.returncode == 0, proc.stderr
+    assert "protocol pour_grasp" in proc.stdout and "hold" in proc.stdout
+    assert not list(tmp_path.rglob("run.zarr"))
+
+
+def test_plan_only_does_not_build_the_lab(monkeypatch):
+    from hydra import compose, initialize_config_dir
+
+    import protocols.run as run
+    from protocols.schema import register
+    register()
+    monkeypatch.setattr(run, "make_lab", lambda cfg: pytest.fail("plan_only built the lab"))
+    conf = Path(run.__file__).resolve().parents[1] / "conf"
+    with initialize_config_dir(config_dir=str(conf), version_base=None):
+        cfg = compose("config", overrides=["plan_only=true"])
+    assert run.run_protocol(cfg, "/nonexistent", console=lambda *a: None).status == "planned"
+
+
+@pytest.mark.parametrize("override, key", [
+    ("protocol.steps.0.move_to.at=before:feature_7", "protocol.steps[0].move_to.at"),
+    ("protocol.steps.5.lift.height=900", "hardware.workspace.max_m[2]"),
+    ("hardware.fingers=[ff,xx]", "hardware.fingers"),
+])
+def test_bad_input_is_one_line_naming_the_key_and_nothing_moves(tmp_path, override, key):
+    proc = tactile_run(tmp_path, override, *FAST)
+    assert proc.returncode == 2, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and key in lines[0], proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert not list(tmp_path.rglob("run.zarr"))
+
+
+def test_unknown_keys_and_protocols_are_refused(tmp_path):
+    for override in ("protocol.sweep_sped=3", "protocol=swirl"):
+        proc = tactile_run(tmp_path, override, *FAST)
+        assert proc.returncode != 0 and ("sweep_sped" in proc.stderr or "swirl" in proc.stderr), proc.stderr
+        assert "Traceback" not in proc.stderr
+    assert not list(tmp_path.rglob("run.zarr"))
+
+
+def test_multirun_two_by_two_gives_four_runs_and_a_summary(tmp_path):
+    proc = tactile_run(tmp_path, "-m", "protocol=straws_sweep,sticks_sweep", "protocol.sweep_speed=10,20",
+                       f"hydra.sweep.dir={tmp_path}/sweep", *FAST)
+    assert proc.returncode == 0, proc.stderr
+    runs = run_dirs(tmp_path / "sweep")
+    assert len(runs) == 4
+    assert all(json.loads((r / "run.json").read_text())["status"] == "success" for r in runs)
+    table = (tmp_path / "sweep" / "summary.csv").read_text().splitlines()
+    assert len(table) == 5 and "overrides" in table[0]
+    assert "protocol.sweep_speed=20" in (tmp_path / "sweep" / "summary.md").read_text()
+
+
+def test_sigkill_leaves_a_store_with_all_but_the_last_second(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-c", "from protocols.cli import main; main()",
+                             "hardware.realtime=true", *FAST], cwd=tmp_path,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 60
+    while not list(tmp_path.rglob("run.zarr")) and time.time() < deadline:
+        time.sleep(0.1)
+    time.sleep(6.0)                               # mid-protocol: the sweep runs from ~5 s to ~13 s
+    killed_at = datetime.now().astimezone()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=10)
+    (store,) = list(tmp_path.rglob("run.zarr"))
+    tree = xr.open_datatree(store, engine="zarr")
+    assert tree.attrs["status"] == "running"       # nobody closed it: recovery marks it later
+    started = datetime.fromisoformat(tree.attrs["recording_start_time"].replace("Z", "+00:00"))
+    elapsed = (killed_at - started).total_seconds()
+    last = float(tree["biotac"]["time"].values[-1])
+    assert last >= elapsed - 1.0 - 0.3, f"store ends at {last:.2f} s, kill at {elapsed:.2f} s"
+    assert np.all(np.diff(tree["biotac"]["seq"].values) == 1)
+    assert tree["arm"].sizes["time_arm"] > 0 and len(tree["events"]["kind"]) >= 3
+
+
+def _start_realtime_run(tmp_path):
+    proc = subprocess.Popen([sys.executable, "-c", "from protocols.cli import main; main()",
+                             "hardware.realtime=true", *FAST], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while not list(tmp_path.rglob("run.zarr")) and time.time() < deadline:
+        time.sleep(0.1)
+    time.sleep(7.0)                               # in the sweep
+    return proc
+
+
+@pytest.mark.parametrize("presses, retract", [(1, True), (2, False)])
+def test_ctrl_c_stops_safely_once_and_at_once_twice(tmp_path, presses, retract):
+    proc = _start_realtime_run(tmp_path)
+    for _ in range(presses):
+        proc.send_signal(signal.SIGINT)
+        time.sleep(0.05)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 3, err
+    assert ": aborted" in out
+    (store,) = list(tmp_path.rglob("run.zarr"))
+    tree = xr.open_datatree(store, engine="zarr")
+    assert tree.attrs["status"] == "aborted"
+    kinds = list(tree["events"]["kind"].values)
+    assert "abort" in kinds and ("retract" in kinds) == retract
+    assert json.loads((store.parent / "run.json").read_text())["status"] == "aborted"
