@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import sys
 import traceback
 from pathlib import Path
@@ -25,13 +26,20 @@ from omegaconf import OmegaConf
 from .run import hand_off, run_protocol
 from .schema import register
 
+log = logging.getLogger("tactile-run")
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 EXIT_CODES = {"success": 0, "planned": 0, "failed": 1, "aborted": 3}
 BAD_INPUT = 2
 _exit = {"code": 0}
 
 
-def run_job(cfg, console=print) -> int:
+def console(message: str) -> None:
+    """A line for the operator, also kept in the run's log file."""
+    print(message, flush=True)
+    log.info(message)
+
+
+def run_job(cfg, console=console) -> int:
     """Run one Hydra job; never raises. Returns the exit code."""
     hc = HydraConfig.get()
     run_dir = Path(hc.runtime.output_dir)
@@ -60,6 +68,7 @@ def _report(cfg, exc: Exception, what: str) -> None:
     if cfg.get("verbose"):
         traceback.print_exception(exc)
     print(f"{what}: {exc}", file=sys.stderr)
+    log.error(f"{what}: {exc}", exc_info=exc)
 
 
 def _refuse_parallel_hardware(cfg, hc) -> None:

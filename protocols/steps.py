@@ -109,6 +109,8 @@ class MoveTo(Step):
     speed: float | None = None
 
     def target(self, ctx) -> np.ndarray:
+        if self.pose is not None and self.at is not None:
+            raise ProtocolError(self.key, f"give either `at` ({self.at!r}) or `pose`, not both")
         if self.pose is not None:
             if len(self.pose) != 6:
                 raise ProtocolError(f"{self.key}.pose", f"expected 6 numbers [x,y,z,rx,ry,rz], got {self.pose}")
@@ -404,6 +406,9 @@ def _convert(value, annotation: str, key: str) -> Any:
                 raise ProtocolError(f"{key}.{unknown[0]}", f"unknown criterion; expected one of {sorted(names)}")
             if not value:
                 raise ProtocolError(key, f"expected at least one criterion of {sorted(names)}")
+            if "pdc_rise" in value and "contact_lost" in value:
+                raise ProtocolError(key, "pdc_rise (contact made) and contact_lost (contact gone) contradict "
+                                         "each other; give one")
             return Criterion(**{k: _convert(v, "float", f"{key}.{k}") for k, v in value.items()})
         if opt.startswith("list[") and isinstance(value, list):
             inner = opt[5:-1]

@@ -4,6 +4,7 @@ from pathlib import Path
 
 import pytest
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 
 from hardware.sim import make_sim_lab
 from protocols.engine import ABORTED, FAILED, SUCCESS, RunEngine
@@ -62,6 +63,9 @@ def test_one_protocol_serves_every_board():
     ([{"repeat": {"times": 0, "steps": [{"wait": {}}]}}], "protocol.steps[0].repeat.times", "≥ 1"),
     ([{"grasp": {"fingers": ["ff", "xx"]}}], "protocol.steps[0].grasp.fingers[1]", "expected one of"),
     ([{"approach": {"until": {"force": 500.0}}}], "protocol.steps[0].approach.until.force", "max_contact_force_n"),
+    ([{"hold": {"until": {"pdc_rise": 5, "contact_lost": 5}}}], "protocol.steps[0].hold.until", "contradict"),
+    ([{"move_to": {"at": "home", "pose": [0.3, 0, 0.2, 3.14, 0, 0]}}], "protocol.steps[0].move_to", "not both"),
+    ([{"move_to": {}}], "protocol.steps[0].move_to", "expected `at`"),
 ])
 def test_bad_steps_name_the_yaml_key(steps, key, words):
     cfg = _cfg()
@@ -144,3 +148,16 @@ def test_operator_stop_retracts_and_aborts():
     assert "retract" in events.kinds() and "step_end" in events.kinds()
     sweep_z = plan.steps[3].waypoints[0][2]
     assert z_after == pytest.approx(sweep_z + 0.02, abs=1e-3)
+
+
+def test_parallel_launchers_are_refused_for_real_hardware():
+    from types import SimpleNamespace
+
+    from protocols.cli import _refuse_parallel_hardware
+    hc = OmegaConf.create({"launcher": {"_target_": "hydra_plugins.hydra_joblib_launcher.JoblibLauncher"}})
+    lab = OmegaConf.create({"hardware": {"backend": "lab"}})
+    with pytest.raises(ValueError, match="one robot"):
+        _refuse_parallel_hardware(lab, hc)
+    _refuse_parallel_hardware(OmegaConf.create({"hardware": {"backend": "sim"}}), hc)   # sim: allowed
+    basic = OmegaConf.create({"launcher": {"_target_": "hydra._internal.core_plugins.basic_launcher.BasicLauncher"}})
+    _refuse_parallel_hardware(lab, basic)
