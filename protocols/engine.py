@@ -24,6 +24,7 @@ import numpy as np
 
 from hardware.errors import DeviceError
 
+from .interlocks import InterlockTripped, Interlocks, SafetyConfig
 from .plan import Geometry, Limits, Plan, PlannedStep
 from .steps import Criterion
 
@@ -57,6 +58,8 @@ class RunContext(Geometry):
         self.fingers = list(lab.biotac.fingers)
         self.finger_index = self.fingers.index(cfg.protocol.finger)
         self.tare_pdc = np.zeros(len(self.fingers))
+        safety = cfg.get("safety") or SafetyConfig()
+        self.interlocks = Interlocks(safety, self.limits, self.fingers, lab.biotac.rate_hz, self.clock)
 
     @property
     def pose(self) -> np.ndarray:
@@ -66,7 +69,8 @@ class RunContext(Geometry):
         self.recorder.event(kind, name, detail)
 
     def _tick(self) -> None:
-        """Advance one poll period; raise :class:`RunAborted` on a stop request."""
+        """Advance one poll period; raise :class:`RunAborted` on a stop request and
+        :class:`~protocols.interlocks.InterlockTripped` when a safety limit is breached."""
         t0 = self.clock.now()
         self.clock.sleep(self.poll)
         if self.progress:
@@ -75,6 +79,7 @@ class RunContext(Geometry):
             raise RunAborted("stopped by the operator")
         if self.lab.arm.is_protective_stopped():
             raise DeviceError("arm: protective stop")
+        self.interlocks.check(self.lab)
 
     def tare(self, seconds: float = TARE_S) -> None:
         """Average PDC at rest, the zero of the contact criteria (and of the analysis)."""
@@ -87,7 +92,7 @@ class RunContext(Geometry):
                 samples.append(frame.pdc.astype(float))
         if not samples:
             raise DeviceError("biotac: no valid frame during the tare; is the sensor streaming?")
-        self.tare_pdc = np.mean(samples, axis=0)
+        self.tare_pdc = self.interlocks.tare_pdc = np.mean(samples, axis=0)
         self.event("tare", "tare", {"start": t0 - self.recorder.t0, "end": self.clock.now() - self.recorder.t0,
                                     "pdc": dict(zip(self.fingers, np.round(self.tare_pdc, 1).tolist()))})
 
@@ -160,6 +165,10 @@ class RunEngine:
                     self._run_step(planned)
                     done += 1
                 return Outcome(SUCCESS, steps_done=done)
+            except InterlockTripped as exc:
+                self.ctx.event("interlock", exc.name, {**exc.detail, "step": done})
+                self._make_safe(retract=True)
+                return Outcome(ABORTED, str(exc), done)
             except RunAborted as exc:
                 self.ctx.event("abort", "operator", {"reason": str(exc), "step": done})
                 self._make_safe(retract=True)

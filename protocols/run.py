@@ -14,6 +14,8 @@ from pathlib import Path
 from omegaconf import OmegaConf
 from tqdm import tqdm
 
+from tactile.geometry import load_taxels
+
 from . import provenance
 from .engine import FAILED, Outcome, RunEngine
 from .lab import make_lab
@@ -84,7 +86,6 @@ def hand_off(result: RunResult, analysis_cfg, console=print) -> dict | None:
 
 
 def _calibration(lab) -> dict:
-    from tactile.geometry import load_taxels
     baselines = getattr(lab.biotac, "calibration", {}) or {}
     return {"taxels_mm": load_taxels().tolist(),
             "baseline_counts": {f: [float(x) for x in v] for f, v in baselines.items()}}

@@ -18,6 +18,8 @@ from typing import Any
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
+from .interlocks import SafetyConfig
+
 
 @dataclass
 class ProtocolConfig:
@@ -48,6 +50,7 @@ class RunConfig:
     hardware: Any = MISSING
     surface: Any = None
     analysis: Any = field(default_factory=dict)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
     plan_only: bool = False            # expand and check the plan, print it, touch no hardware
     analyze: bool = True               # hand the run to the analysis pipeline when it ends
     verbose: bool = False              # tracebacks on errors

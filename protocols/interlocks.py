@@ -1,0 +1,110 @@
+"""Safety interlocks watched continuously while a protocol runs.
+
+Every engine period (one BioTac frame, 10 ms at 100 Hz) :meth:`Interlocks.check` reads the
+newest sensor frame and the arm's state and raises :class:`InterlockTripped` when a limit
+is breached; the engine then stops the motion, retracts along the approach direction and
+closes the run as ``aborted`` with the interlock named (``interlock`` event).
+
+Limits (``safety`` in the run config, :class:`SafetyConfig`):
+
+- BioTac saturation: PDC above ``pdc_max`` counts, or any electrode below
+  ``electrode_min`` counts (electrode counts fall under pressure and bottom out);
+- TCP force above ``force_max`` N, TCP speed above ``speed_max`` m/s (measured from
+  successive poses), the TCP outside the workspace envelope;
+- contact held longer than ``contact_time_max`` s (PDC more than ``contact_threshold``
+  counts above its tare on any finger);
+- a stale stream: no new BioTac frame for ``stale_periods`` frame periods — no motion
+  continues blind. (A device that stops answering raises from the driver instead, which
+  fails the run.)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class SafetyConfig:
+    """Interlock limits. ``None`` takes the hardware's own limit (``hardware.arm.*``)."""
+
+    pdc_max: float = 3900.0            # counts
+    electrode_min: float = 100.0       # counts
+    force_max: float | None = None     # N
+    speed_max: float | None = None     # m/s
+    contact_time_max: float = 180.0    # s
+    contact_threshold: float = 30.0    # counts of PDC above the tare
+    stale_periods: int = 10            # BioTac frame periods
+
+
+class InterlockTripped(Exception):
+    """A safety limit was breached; ``name`` says which, ``detail`` the values."""
+
+    def __init__(self, name: str, detail: dict):
+        self.name, self.detail = name, detail
+        super().__init__(f"interlock {name}: " + ", ".join(f"{k}={v}" for k, v in detail.items()))
+
+
+class Interlocks:
+    """Checks one lab against :class:`SafetyConfig` limits, keeping what it needs between
+    checks (contact start times, the previous pose)."""
+
+    def __init__(self, cfg: SafetyConfig, limits, fingers: list[str], rate_hz: float, clock):
+        self.cfg, self.limits, self.fingers, self.clock = cfg, limits, fingers, clock
+        self.force_max = limits.max_force if cfg.force_max is None else cfg.force_max
+        self.speed_max = limits.max_speed if cfg.speed_max is None else cfg.speed_max
+        self.stale_s = cfg.stale_periods / rate_hz
+        self.tare_pdc = np.zeros(len(fingers))
+        self._contact_since = np.full(len(fingers), np.nan)
+        self._last_seq = None
+        self._last_new_frame = clock.now()
+        self._last_pose = None
+
+    def check(self, lab) -> None:
+        """Raise :class:`InterlockTripped` if any limit is breached now."""
+        now = self.clock.now()
+        self._check_biotac(lab.biotac.latest(), now)
+        self._check_arm(lab.arm, now)
+
+    def _check_biotac(self, frame, now: float) -> None:
+        if frame is None or frame.seq == self._last_seq:
+            if now - self._last_new_frame > self.stale_s:
+                raise InterlockTripped("stale_biotac", {"no_frame_for_s": round(now - self._last_new_frame, 3),
+                                                        "limit_s": self.stale_s})
+            return
+        self._last_seq, self._last_new_frame = frame.seq, now
+        if not frame.is_valid():
+            return                                   # corrupt frames are counted by the recorder
+        pdc = frame.pdc.astype(float)
+        if np.any(pdc > self.cfg.pdc_max):
+            i = int(np.argmax(pdc))
+            raise InterlockTripped("pdc_saturation", {"finger": self.fingers[i], "pdc": int(pdc[i]),
+                                                      "limit": self.cfg.pdc_max})
+        low = frame.electrodes.min(axis=1)
+        if np.any(low < self.cfg.electrode_min):
+            i = int(np.argmin(low))
+            raise InterlockTripped("electrode_saturation", {"finger": self.fingers[i], "counts": int(low[i]),
+                                                            "limit": self.cfg.electrode_min})
+        touching = pdc - self.tare_pdc > self.cfg.contact_threshold
+        self._contact_since = np.where(touching, np.where(np.isnan(self._contact_since), now,
+                                                          self._contact_since), np.nan)
+        held = now - np.nan_to_num(self._contact_since, nan=now)
+        if np.any(held > self.cfg.contact_time_max):
+            i = int(np.argmax(held))
+            raise InterlockTripped("contact_time", {"finger": self.fingers[i], "held_s": round(float(held[i]), 2),
+                                                    "limit_s": self.cfg.contact_time_max})
+
+    def _check_arm(self, arm, now: float) -> None:
+        pose = np.asarray(arm.tcp_pose(), float)
+        force = float(np.linalg.norm(np.asarray(arm.tcp_wrench(), float)[:3]))
+        if force > self.force_max:
+            raise InterlockTripped("tcp_force", {"force_n": round(force, 2), "limit_n": self.force_max})
+        lo, hi = self.limits.workspace_min, self.limits.workspace_max
+        if np.any(pose[:3] < lo) or np.any(pose[:3] > hi):
+            raise InterlockTripped("workspace", {"position_m": np.round(pose[:3], 4).tolist()})
+        if self._last_pose is not None and now > self._last_pose[0]:
+            speed = float(np.linalg.norm(pose[:3] - self._last_pose[1][:3]) / (now - self._last_pose[0]))
+            if speed > self.speed_max * 1.05:        # 5 %: pose quantisation between two reads
+                raise InterlockTripped("tcp_speed", {"speed_m_s": round(speed, 4), "limit_m_s": self.speed_max})
+        self._last_pose = (now, pose)
