@@ -120,6 +120,16 @@ def test_sigkill_leaves_a_store_with_all_but_the_last_second(tmp_path):
     assert np.all(np.diff(tree["biotac"]["seq"].values) == 1)
     assert tree["arm"].sizes["time_arm"] > 0 and len(tree["events"]["kind"]) >= 3
 
+    # tactile-recover closes it as crashed; it then opens like any other run.
+    from protocols.recover import main as recover_main
+    assert recover_main([str(store)]) == 0
+    tree = xr.open_datatree(store, engine="zarr")
+    assert tree.attrs["status"] == "crashed" and tree.attrs["last_sample_s"] == pytest.approx(last, abs=0.05)
+    assert tree["biotac"].sizes["time"] == len(tree["biotac"]["seq"])
+    assert json.loads((store.parent / "run.json").read_text())["status"] == "crashed"
+    assert recover_main([str(store)]) == 0                  # idempotent
+    assert recover_main([str(tmp_path)]) == 2               # not a run store
+
 
 def _start_realtime_run(tmp_path):
     proc = subprocess.Popen([sys.executable, "-c", "from protocols.cli import main; main()",
