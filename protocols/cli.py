@@ -23,6 +23,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
+from . import resume
 from .run import hand_off, run_protocol
 from .schema import register
 
@@ -45,6 +46,9 @@ def run_job(cfg, console=console) -> int:
     run_dir = Path(hc.runtime.output_dir)
     try:
         _refuse_parallel_hardware(cfg, hc)
+        if cfg.resume and not cfg.plan_only and resume.decide(run_dir, OmegaConf.to_yaml(cfg, resolve=True)) == "skip":
+            console(f"run {run_dir}: skipped (succeeded before with the same config and code)")
+            return 0
         result = run_protocol(cfg, run_dir, overrides=list(hc.overrides.task), console=console)
     except ValueError as exc:                       # ProtocolError, ConfigError: bad input
         _report(cfg, exc, "error")

@@ -157,3 +157,23 @@ def test_ctrl_c_stops_safely_once_and_at_once_twice(tmp_path, presses, retract):
     kinds = list(tree["events"]["kind"].values)
     assert "abort" in kinds and ("retract" in kinds) == retract
     assert json.loads((store.parent / "run.json").read_text())["status"] == "aborted"
+
+
+def test_resumed_sweep_skips_successes_reruns_the_rest_and_refuses_a_changed_config(tmp_path):
+    sweep = ["-m", "protocol.sweep_speed=10,20", f"hydra.sweep.dir={tmp_path}/sweep", *FAST]
+    assert tactile_run(tmp_path, *sweep).returncode == 0
+    first, second = run_dirs(tmp_path / "sweep")
+    ids = {d: json.loads((d / "run.json").read_text())["run_id"] for d in (first, second)}
+    info = json.loads((second / "run.json").read_text())
+    (second / "run.json").write_text(json.dumps({**info, "status": "failed"}))   # as if it had failed
+
+    proc = tactile_run(tmp_path, *sweep, "resume=true")
+    assert proc.returncode == 0, proc.stderr
+    assert "skipped" in proc.stdout and proc.stdout.count(": success") == 1
+    assert json.loads((first / "run.json").read_text())["run_id"] == ids[first]        # kept
+    assert json.loads((second / "run.json").read_text())["run_id"] != ids[second]      # re-run
+    assert (second / "previous" / "0" / "run.zarr").exists()
+    assert len((tmp_path / "sweep" / "summary.csv").read_text().splitlines()) == 3
+
+    proc = tactile_run(tmp_path, *sweep, "resume=true", "protocol.sweep_depth=1.0")
+    assert proc.returncode == 2 and "another config" in proc.stderr and "sweep_depth" in proc.stderr

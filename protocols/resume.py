@@ -1,0 +1,74 @@
+"""Resuming a sweep: ``tactile-run -m ... hydra.sweep.dir=DIR resume=true``.
+
+Re-running the same sweep command into the same sweep directory with ``resume=true``
+skips every job whose run ended ``success`` — after checking that its recorded config and
+code version (git commit and diff hash) match what this job would run — and runs the
+others again, keeping the earlier attempt under ``previous/<n>/`` in the job directory. A
+mismatch is refused with the difference shown: resuming must never mix runs of different
+configurations or code in one sweep.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import shutil
+from pathlib import Path
+
+import yaml
+
+from .provenance import git_state
+
+IGNORED_KEYS = ("resume", "progress", "verbose")
+
+
+class ResumeMismatch(ValueError):
+    """The earlier run of this job used another config or code version."""
+
+
+def comparable_config(config_yaml: str) -> str:
+    """The config as YAML without the keys that do not change what a run does."""
+    cfg = yaml.safe_load(config_yaml) or {}
+    for key in IGNORED_KEYS:
+        cfg.pop(key, None)
+    return yaml.safe_dump(cfg, sort_keys=True)
+
+
+def decide(run_dir, config_yaml: str, git: dict | None = None) -> str:
+    """``"skip"`` if ``run_dir`` holds a successful run of the same config and code,
+    ``"run"`` if it holds nothing or an unsuccessful run (moved to ``previous/<n>/``).
+    Raises :class:`ResumeMismatch` showing the difference otherwise."""
+    run_dir = Path(run_dir)
+    run_json = run_dir / "run.json"
+    if not run_json.exists():
+        _set_aside(run_dir)
+        return "run"
+    info = json.loads(run_json.read_text())
+    if info.get("status") != "success":
+        _set_aside(run_dir)
+        return "run"
+    before, now = comparable_config(info.get("config_yaml", "")), comparable_config(config_yaml)
+    if before != now:
+        diff = "".join(difflib.unified_diff(before.splitlines(True), now.splitlines(True),
+                                            "recorded run", "this job", n=1))
+        raise ResumeMismatch(f"resume: {run_dir} was run with another config; refusing to mix them in one "
+                             f"sweep:\n{diff}")
+    git = git_state() if git is None else git
+    recorded = info.get("git", {})
+    for key in ("commit", "diff_sha256"):
+        if recorded.get(key) != git.get(key):
+            raise ResumeMismatch(f"resume: {run_dir} was run with code {key} {recorded.get(key)}, this job "
+                                 f"would run {git.get(key)}; refusing to mix code versions in one sweep")
+    return "skip"
+
+
+def _set_aside(run_dir: Path) -> None:
+    """Move an earlier, unsuccessful attempt's files to ``previous/<n>/``."""
+    leftovers = [p for p in run_dir.glob("*") if p.name not in (".hydra", "previous") and not p.name.endswith(".log")]
+    if not leftovers:
+        return
+    n = len(list((run_dir / "previous").glob("*"))) if (run_dir / "previous").exists() else 0
+    target = run_dir / "previous" / str(n)
+    target.mkdir(parents=True)
+    for p in leftovers:
+        shutil.move(str(p), target / p.name)
