@@ -7,7 +7,8 @@ method (pykalman per finger, per-frame scipy.interpolate.griddata of the project
 surface, per-frame aggregation), with the ratios. A "finger-frame" is one finger's sample
 rendered and processed in every configured view (3 by default); per-view rates are printed
 too. The naive stages are timed on a slice of the record (they are per-frame costs) and
-reported as rates.
+reported as rates. ``render_detail`` rows compare, per view, the exact renderer's mesh walk
+with the plain z-buffer it falls back to (same frames, same run).
 
     python benchmarks/bench_pipeline.py [--seconds 60] [--fingers 5] [--naive-frames 100]
 """
@@ -69,7 +70,7 @@ def ours(model, act):
     c = model.config.flow
     for f in range(n_fingers):
         for name, plan in model.plans.items():
-            u8, dt = timed(lambda: model.to_uint8(model.render(smoothed[:, f], name)))
+            u8, dt = timed(model.render_uint8, smoothed[:, f], name)
             est_t["render"] += dt
             field = np.zeros((n,) + plan.shape + (2,), np.float32)
             t0 = time.perf_counter()
@@ -81,6 +82,25 @@ def ours(model, act):
             _, dt = timed(aggregate.aggregate_flow, field, plan.mask, model.config.noise)
             est_t["aggregate"] += dt
     return {"smoothing": t_smooth, **est_t}, flow_calls
+
+
+def render_detail(model, act):
+    """Per view: the exact renderer (mesh walk + z-buffer fallback) against the z-buffer alone
+    on the same frames of finger 0, µs per view-frame, the share of frames that needed the
+    full z-buffer and the pixels per frame it z-tested one by one. Both give the same 8-bit
+    frames (checked)."""
+    smoothed = model.smooth(act[:, 0])
+    lo_hi = model.config.intensity_range
+    for name, plan in model.plans.items():
+        values = smoothed @ model.weights[plan.vertices].T
+        (fast, n_full, n_slow), t_fast = timed(frames._render, plan, model.mesh, values, model.config.scale, lo_hi)
+        (ref, _, _), t_ref = timed(frames._render, plan, model.mesh, values, model.config.scale, lo_hi, False)
+        n = len(values)
+        emit(impl="ours", render="exact", stage="render_detail", view=name,
+             walk_us_per_frame=round(t_fast / n * 1e6, 2), zbuffer_us_per_frame=round(t_ref / n * 1e6, 2),
+             speedup=round(t_ref / t_fast, 2), full_zbuffer_frames=round(n_full / n, 4),
+             single_pixel_ztests_per_frame=round(n_slow / n, 4),
+             identical_uint8=bool(np.array_equal(fast, ref)))
 
 
 def naive(model, act, n_frames):
@@ -176,6 +196,8 @@ def main():
              finger_frames_per_s=round(n_ff / total), bare_flow_seconds=round(t["flow"], 3),
              ratio_to_bare_flow=round(total / t["flow"], 3), target_ratio=1.2, flow_calls=flow_calls)
         rates[render] = (n_ff / nonflow, n_ff / total)
+        if render == "exact":
+            render_detail(m, act)
 
     m = args.naive_frames
     nt = naive(model, act, m)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy import ndimage
 
@@ -43,8 +44,10 @@ def aggregate_flow(flow, mask, noise: float = 0.05) -> FlowAggregates:
     ``noise``: magnitude (flow units) below which a pixel counts as not moving, for
     ``confidence``. Divergence and curl are means of central differences over the mask
     eroded by one pixel, so the footprint's edge (where flow meets the zero background)
-    does not leak into them. Mean flow, divergence and curl are linear in the field, so all
-    four are one matrix product with the weights of :func:`flow_functionals`.
+    does not leak into them. Mean flow, divergence and curl are linear in the field: per
+    frame they are the sums Σ_p weights[p]·flow[p] with the weights of
+    :func:`flow_functionals`, which :func:`_aggregate` computes in one pass over each frame
+    together with the confidence count (float64 sums; |flow|² in float32).
     """
     flow = np.asarray(flow, dtype=np.float32)
     mask = np.asarray(mask, dtype=bool)
@@ -53,14 +56,37 @@ def aggregate_flow(flow, mask, noise: float = 0.05) -> FlowAggregates:
     if not mask.any():
         raise ValueError("mask: expected a footprint with at least one pixel, got an empty mask")
     n = len(flow)
-    sums = flow.reshape(n, -1) @ flow_functionals(mask).astype(np.float32)    # (T, 4)
-    mean, divergence, curl = sums[:, :2].astype(np.float64), sums[:, 2], sums[:, 3]
-    flat = flow.reshape(n, -1, 2)
-    moving = (np.einsum("tpk,tpk->tp", flat, flat) > np.float32(noise) ** 2)[:, mask.ravel()]
+    weights = flow_functionals(mask).reshape(-1, 2, 4)                     # (H·W, 2, 4)
+    sums, moving = np.empty((n, 4)), np.empty(n, np.float32)
+    _aggregate(np.ascontiguousarray(flow).reshape(n, -1), np.ascontiguousarray(weights[:, 0, 0]),
+               np.ascontiguousarray(weights[:, 0, 2]), np.ascontiguousarray(weights[:, 1, 2]),
+               mask.ravel().astype(np.float32), np.float32(noise) ** 2, sums, moving)
+    mean, divergence, curl = sums[:, :2].copy(), sums[:, 2].copy(), sums[:, 3].copy()
     return FlowAggregates(mean=mean, magnitude=np.hypot(mean[:, 0], mean[:, 1]),
                           direction=np.arctan2(mean[:, 1], mean[:, 0]),
-                          divergence=divergence.astype(np.float64), curl=curl.astype(np.float64),
-                          confidence=moving.mean(axis=1))
+                          divergence=divergence, curl=curl, confidence=moving / np.float64(mask.sum()))
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc"})
+def _aggregate(flow, in_mask, d_col, d_row, mask01, noise2, sums, moving):
+    """One pass per frame over (T, 2P) ``flow`` (u, v interleaved): Σ in_mask·(u, v),
+    Σ d_col·u + d_row·v (divergence), Σ d_col·v − d_row·u (curl) into ``sums`` (T, 4), and
+    the number of mask pixels with u² + v² > noise2 (float32, as NumPy would) into
+    ``moving``. The weights are those of :func:`flow_functionals` (in_mask = mask / mask.sum();
+    the curl's weights are the divergence's, swapped). ``reassoc`` lets the sums vectorise."""
+    for t in range(flow.shape[0]):
+        f = flow[t]
+        su = sv = div = curl = 0.0
+        count = np.float32(0.0)
+        for p in range(in_mask.shape[0]):
+            u, v = f[2 * p], f[2 * p + 1]
+            su += in_mask[p] * u
+            sv += in_mask[p] * v
+            div += d_col[p] * u + d_row[p] * v
+            curl += d_col[p] * v - d_row[p] * u
+            count += mask01[p] * (u * u + v * v > noise2)
+        sums[t, 0], sums[t, 1], sums[t, 2], sums[t, 3] = su, sv, div, curl
+        moving[t] = count
 
 
 def flow_functionals(mask) -> np.ndarray:

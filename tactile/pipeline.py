@@ -34,9 +34,10 @@ class TactileConfig:
         mesh_spacing: distance between surface-mesh vertices [mm]; about the pixel size, so
             each pixel is covered by one or two triangles.
         scale: displacement of the tactile surface along its normals [mm per kΩ].
-        render: ``"exact"`` rasterises the displaced surface with a z-buffer every frame
-            (the method); ``"linear"`` renders the undisplaced surface with one precomputed
-            matrix product per frame, identical when ``scale = 0`` and ~4× faster, but it
+        render: ``"exact"`` renders the displaced surface every frame with visibility (the
+            method; see :mod:`tactile.frames`); ``"linear"`` renders the undisplaced surface
+            with one precomputed matrix product per frame, identical when ``scale = 0`` and
+            ~1.5–2× faster, but it
             ignores how the displacement moves silhouettes (mean difference ≈ 0.05 kΩ per
             pixel at the defaults; measure with ``benchmarks/bench_pipeline.py``).
         views: names of the views to render (keys of ``custom_views`` or of
@@ -111,12 +112,22 @@ class TactileModel:
 
     def render(self, activation, view: str) -> np.ndarray:
         """Activation frames (T, H, W) float32 [kΩ] of one view for (T, 24) activation."""
+        return self._render(activation, view, None)
+
+    def render_uint8(self, activation, view: str) -> np.ndarray:
+        """``to_uint8(render(activation, view))``, the 8-bit frames (T, H, W) the flow sees.
+        The exact renderer writes them directly (no float frames in between)."""
+        return self._render(activation, view, self.config.intensity_range)
+
+    def _render(self, activation, view, intensity_range):
         plan = self.plans[view]
         if self.config.render == "linear":
             act = finite_array("activation", activation, ndim=2, last=24).astype(np.float32)
-            return (act @ self.operators[view].T).reshape((len(act),) + plan.shape)
-        values = surface.interpolate(activation, self.weights)
-        return frames.render(plan, self.mesh, values, self.config.scale)
+            out = (act @ self.operators[view].T).reshape((len(act),) + plan.shape)
+            return out if intensity_range is None else frames.to_uint8(out, *intensity_range)
+        # Interpolates only the view's vertices (frames.render_activation), one chunk at a time.
+        return frames.render_activation(plan, self.mesh, self.weights, activation, self.config.scale,
+                                        intensity_range)
 
     def to_uint8(self, frames_kohm) -> np.ndarray:
         low, high = self.config.intensity_range
@@ -167,7 +178,7 @@ def process_view(model: TactileModel, activation, view: str, reference: int | No
     u8 = np.empty((n,) + plan.shape, np.uint8)
     for start in range(0, n, c.chunk):
         stop = min(n, start + c.chunk)
-        u8[start:stop] = model.to_uint8(model.render(activation[start:stop], view))
+        u8[start:stop] = model.render_uint8(activation[start:stop], view)
         if progress:
             progress(stop - start)
 

@@ -121,3 +121,23 @@ def test_aggregates_match_direct_finite_differences(rng):
     rot = np.stack([-0.1 * rows, 0.1 * cols], -1)[None]
     agg = aggregate.aggregate_flow(rot, mask)
     assert agg.curl[0] == pytest.approx(0.2, abs=1e-5) and abs(agg.divergence[0]) < 1e-5
+
+
+def test_fused_aggregation_equals_the_matrix_form(rng):
+    """aggregate_flow's one-pass kernel against flow_functionals and a direct confidence."""
+    mask = np.zeros((28, 40), bool)
+    mask[5:23, 6:34] = True
+    mask[5:9, 6:12] = False
+    field = (rng.normal(size=(7, 28, 40, 2)) * 0.1).astype(np.float32)
+    field[0] = 0.0
+    for noise in (0.05, 0.12):
+        agg = aggregate.aggregate_flow(field, mask, noise)
+        sums = field.reshape(7, -1).astype(np.float64) @ aggregate.flow_functionals(mask)
+        assert np.allclose(agg.mean, sums[:, :2], rtol=0, atol=1e-7)
+        assert np.allclose(agg.divergence, sums[:, 2], rtol=0, atol=1e-7)
+        assert np.allclose(agg.curl, sums[:, 3], rtol=0, atol=1e-7)
+        speed2 = (field[..., 0] * field[..., 0] + field[..., 1] * field[..., 1])[:, mask]
+        assert np.array_equal(agg.confidence, (speed2 > np.float32(noise) ** 2).mean(axis=1))
+        assert agg.confidence[0] == 0.0 and agg.mean.dtype == np.float64
+    with pytest.raises(ValueError, match="mask"):
+        aggregate.aggregate_flow(field, np.zeros((28, 40), bool))

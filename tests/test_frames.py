@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tactile import frames, surface
+from tactile import frames, surface, synthetic
 from tactile.frames import View
 
 
@@ -98,3 +98,71 @@ def test_bad_frame_input(model):
         frames.render(model.plans["bottom"], model.mesh, np.full((1, model.mesh.n_vertices), np.nan), 0.0)
     with pytest.raises(ValueError, match="activation"):
         surface.interpolate(np.zeros(23), model.weights)
+
+
+def _folding_cases(model, plan, rng):
+    """(values, scale) pairs for one view: a sliding contact (no folds), the same contact
+    three times deeper with 4× the displacement (folds), random vertex noise with a small
+    displacement (a few triangles flip: pixel-by-pixel fallback) and a large one (many flip:
+    whole-frame fallback), and the undisplaced surface."""
+    k = len(plan.vertices)
+    act = synthetic.moving_bump(model.taxels, start=(-8, -3, 0), velocity=(10, 4, 0), duration=1.6)
+    contact = (act + rng.normal(0, 0.07, act.shape)) @ model.weights[plan.vertices].T
+    return [(contact, 0.25), (3 * contact, 1.0), (rng.uniform(0, 8, (150, k)), 0.02),
+            (rng.uniform(0, 8, (150, k)), 0.05), (rng.uniform(0, 8, (30, k)), 0.25),
+            (rng.uniform(0, 8, (20, k)), 0.0)]
+
+
+@pytest.mark.parametrize("view", ["bottom", "left", "right"])
+def test_mesh_walk_renders_the_zbuffer_frames(model, rng, view):
+    """The fast renderer (mesh walk, winding numbers, fallbacks) against the plain z-buffer."""
+    plan, mesh = model.plans[view], model.mesh
+    assert plan.walk is not None
+    full = single = 0
+    for values, scale in _folding_cases(model, plan, rng):
+        fast, n_full, n_single = frames._render(plan, mesh, values, scale)
+        ref, _, _ = frames._render(plan, mesh, values, scale, fast=False)
+        np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-6, err_msg=f"scale {scale}")
+        lo_hi = (1.0, 5.0)                                           # clips at both ends
+        assert np.array_equal(frames._render(plan, mesh, values, scale, lo_hi)[0],
+                              frames.to_uint8(ref, *lo_hi))
+        if scale == 0.0:
+            assert n_full == n_single == 0                           # a flat mesh never folds
+        full += n_full
+        single += n_single
+    assert full > 0 and single > 0                                   # both fallbacks were exercised
+
+
+def test_mesh_walk_is_used_for_a_sliding_contact(model, rng):
+    plan = model.plans["bottom"]
+    values = _folding_cases(model, plan, rng)[0][0]
+    _, n_full, n_single = frames._render(plan, model.mesh, values, 0.25)
+    assert n_full == 0 and n_single < len(values)
+
+
+def test_walk_index_topology(model):
+    for plan in model.plans.values():
+        nb, n_tri = plan.walk.neighbours, len(plan.triangles)
+        inner = nb != frames._NONE
+        # Neighbourhood is symmetric and neighbours share the edge opposite the corner.
+        for f, k in zip(*np.nonzero(inner)):
+            g = nb[f, k]
+            assert f in nb[g]
+            edge = {plan.triangles[f, (k + 1) % 3], plan.triangles[f, (k + 2) % 3]}
+            assert edge <= set(plan.triangles[g])
+        assert (~inner).sum() == len(plan.walk.boundary) and nb[inner].max() < n_tri
+    both = frames.make_plan(model.mesh, View("left_all", look=(0, 1, 0), up=(0, 0, 1), half="all"))
+    assert both.walk is None                                          # faces the camera both ways
+
+
+def test_render_activation_equals_interpolate_then_render(model, rng):
+    act = synthetic.moving_bump(model.taxels, start=(0, -4, 0), velocity=(0, 8, 0), duration=0.3)
+    act = act + rng.normal(0, 0.07, act.shape)
+    for plan in model.plans.values():
+        ref = frames.render(plan, model.mesh, surface.interpolate(act, model.weights), 0.25)
+        got = frames.render_activation(plan, model.mesh, model.weights, act, 0.25)
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-5)
+        u8 = frames.render_activation(plan, model.mesh, model.weights, act, 0.25, (0.0, 8.0))
+        assert u8.dtype == np.uint8 and np.abs(u8.astype(int) - frames.to_uint8(ref, 0.0, 8.0)).max() <= 1
+    with pytest.raises(ValueError, match="activation"):
+        frames.render_activation(model.plans["bottom"], model.mesh, model.weights, np.zeros((3, 23)), 0.25)
