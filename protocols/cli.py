@@ -14,6 +14,7 @@ from __future__ import annotations
 import csv
 import json
 import logging
+import os
 import sys
 import traceback
 from pathlib import Path
@@ -25,7 +26,7 @@ from omegaconf import OmegaConf
 
 from . import resume
 from .run import hand_off, run_protocol
-from .schema import register
+from .schema import check_targets, register
 
 log = logging.getLogger("tactile-run")
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
@@ -45,6 +46,7 @@ def run_job(cfg, console=console) -> int:
     hc = HydraConfig.get()
     run_dir = Path(hc.runtime.output_dir)
     try:
+        check_targets(cfg)
         _refuse_parallel_hardware(cfg, hc)
         if cfg.resume and not cfg.plan_only and resume.decide(run_dir, OmegaConf.to_yaml(cfg, resolve=True)) == "skip":
             console(f"run {run_dir}: skipped (succeeded before with the same config and code)")
@@ -91,8 +93,25 @@ def _app(cfg) -> None:
 
 def main() -> None:
     register()
-    _app()
+    # Hydra raises composition errors (unknown keys, bad YAML...) instead of printing its own
+    # traceback; they are bad input, reported here as one line.
+    os.environ["HYDRA_FULL_ERROR"] = "1"
+    try:
+        _app()
+    except Exception as exc:
+        if "verbose=true" in sys.argv[1:]:
+            traceback.print_exception(exc)
+        print(f"error: {one_line(exc)}", file=sys.stderr)
+        sys.exit(BAD_INPUT)
     sys.exit(_exit["code"])
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception and its cause as one line (Hydra's messages span several)."""
+    parts = [str(exc)]
+    if exc.__cause__ is not None and str(exc.__cause__) not in parts[0]:
+        parts.append(str(exc.__cause__))
+    return "; ".join(line.strip() for part in parts for line in part.splitlines() if line.strip())
 
 
 class SweepSummary(Callback):

@@ -23,6 +23,7 @@ from tactile.geometry import fit_ellipsoid, load_taxels
 from .steps import Criterion, ProtocolError, Repeat, Step, parse_steps
 
 UR10_REACH_M = 1.3          # UR10 working radius from the base axis
+MAX_STEPS = 10_000          # expanded steps: far beyond any lab protocol, short of a runaway repeat
 
 
 @dataclass(frozen=True)
@@ -153,6 +154,8 @@ class PlanContext(Geometry):
         return [self.pose.copy()], duration
 
     def check_reachable(self, pose, key: str) -> None:
+        if not np.all(np.isfinite(np.asarray(pose, float))):
+            raise ProtocolError(key, f"waypoint {list(pose)} is not finite (a NaN or infinite parameter?)")
         p = np.asarray(pose[:3], float)
         lo, hi = self.limits.workspace_min, self.limits.workspace_max
         for axis, name in enumerate("xyz"):
@@ -215,6 +218,9 @@ def make_plan(cfg) -> Plan:
 
     def walk(items):
         for s in items:
+            if len(planned) > MAX_STEPS:
+                raise ProtocolError(s.key, f"the protocol expands to more than {MAX_STEPS} steps; "
+                                           f"is a repeat count too large?")
             if isinstance(s, Repeat):
                 s.plan(ctx)
                 for _ in range(s.times):

@@ -58,5 +58,25 @@ class RunConfig:
     resume: bool = False               # (multirun) skip jobs whose runs already succeeded
 
 
+# Classes a config may name with ``_target_`` (Hydra instantiates them); nothing else.
+ALLOWED_TARGETS = ("protocols.cli.SweepSummary",)
+
+
+def check_targets(node, key: str = "") -> None:
+    """Refuse any ``_target_`` outside :data:`ALLOWED_TARGETS`: a config must never make the
+    framework import or call arbitrary code."""
+    from omegaconf import DictConfig, ListConfig
+    if isinstance(node, DictConfig):
+        for k in node.keys():
+            child = f"{key}.{k}" if key else str(k)
+            if k == "_target_" and node.get(k) not in ALLOWED_TARGETS:
+                raise ValueError(f"{child}: {node.get(k)!r} is not allowed; configs may only name this project's "
+                                 f"classes {list(ALLOWED_TARGETS)}")
+            check_targets(node._get_node(k), child)
+    elif isinstance(node, ListConfig):
+        for i, item in enumerate(node._iter_ex(resolve=False)):
+            check_targets(item, f"{key}[{i}]")
+
+
 def register() -> None:
     ConfigStore.instance().store(name="run_schema", node=RunConfig)

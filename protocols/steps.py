@@ -357,14 +357,19 @@ def _positive(value, key: str) -> None:
 # ----------------------------------------------------------------------------- parsing
 
 
-def parse_steps(items, key: str = "protocol.steps") -> list[Step]:
+MAX_NESTING = 8               # repeats inside repeats
+
+
+def parse_steps(items, key: str = "protocol.steps", depth: int = 0) -> list[Step]:
     """YAML list of ``{kind: {params}}`` → step objects, every key and type checked."""
     if not isinstance(items, list) or not items:
         raise ProtocolError(key, "expected a non-empty list of steps")
-    return [parse_step(item, f"{key}[{i}]") for i, item in enumerate(items)]
+    if depth > MAX_NESTING:
+        raise ProtocolError(key, f"repeats nested more than {MAX_NESTING} deep")
+    return [parse_step(item, f"{key}[{i}]", depth) for i, item in enumerate(items)]
 
 
-def parse_step(item, key: str) -> Step:
+def parse_step(item, key: str, depth: int = 0) -> Step:
     if not isinstance(item, dict) or len(item) != 1:
         raise ProtocolError(key, f"expected one step as `- <kind>: {{params}}` with kind one of "
                                  f"{sorted(STEP_KINDS)}, got {item!r}")
@@ -382,7 +387,7 @@ def parse_step(item, key: str) -> Step:
         raise ProtocolError(f"{key}.{unknown[0]}", f"unknown parameter; {kind} takes {sorted(fields)}")
     values = {name: _convert(value, fields[name].type, f"{key}.{name}") for name, value in params.items()}
     if kind == "repeat":
-        values["steps"] = parse_steps(params.get("steps"), f"{key}.steps")
+        values["steps"] = parse_steps(params.get("steps"), f"{key}.steps", depth + 1)
     return cls(key=key, **values)
 
 
@@ -398,6 +403,8 @@ def _convert(value, annotation: str, key: str) -> Any:
         raise ProtocolError(key, f"expected {annotation}, got null")
     for opt in options:
         if opt in _SCALARS and isinstance(value, _SCALARS[opt]) and not (opt != "bool" and isinstance(value, bool)):
+            if opt == "float" and not math.isfinite(value):
+                raise ProtocolError(key, f"expected a finite number, got {value!r}")
             return float(value) if opt == "float" else value
         if opt == "Criterion" and isinstance(value, dict):
             names = {f.name for f in dataclasses.fields(Criterion)}
