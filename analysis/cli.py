@@ -1,0 +1,118 @@
+"""``tactile-analyze``: (re-)analyse recorded runs (Hydra app, config group ``analysis``).
+
+    tactile-analyze run=outputs/2026-01-01/12-00-00_straws_sweep/run.zarr
+    tactile-analyze run=outputs/2026-01-01 analysis.flow.method=dis    # every run.zarr below
+    tactile-analyze -m 'run=glob(outputs/*/*/run.zarr)'
+
+Exit status: 0 analysed, 2 bad input or config (nothing written), 1 analysis failed. Errors
+are one line; ``verbose=true`` adds the traceback. Several runs (a directory, or ``-m``) also
+write ``analysis_summary.csv`` / ``.md`` (one row per run: the ``headline`` of its summary)
+in the current directory.
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+import traceback
+from pathlib import Path
+
+import hydra
+from hydra.experimental.callback import Callback
+
+from .config import AnalysisConfigError
+from .load import AnalysisInputError
+
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+BAD_INPUT, FAILED = 2, 1
+_state = {"code": 0, "rows": []}
+
+
+def find_stores(path: Path) -> list[Path]:
+    """``path`` itself if it is a run store, else every ``run.zarr`` below it (sorted)."""
+    if (path / "zarr.json").is_file() or path.suffix == ".zarr":
+        return [path]
+    if path.is_dir():
+        return sorted(p for p in path.rglob("run.zarr") if p.is_dir())
+    return [path]
+
+
+def analyse_paths(run: str, analysis_cfg, verbose: bool = False, console=print) -> int:
+    """Analyse one run store or every run store under a directory; never raises. Exit code."""
+    from .run import analyze_run
+    stores = find_stores(Path(run))
+    if not stores:
+        print(f"error: {run}: no run.zarr found", file=sys.stderr)
+        return BAD_INPUT
+    code = 0
+    for store in stores:
+        row = {"run": str(store)}
+        try:
+            summary = analyze_run(store, analysis_cfg, console=console)
+            row["result"] = "analysed"
+            row.update({k: v for k, v in summary.get("headline", {}).items()})
+        except (AnalysisInputError, AnalysisConfigError) as exc:
+            _report(exc, "error", verbose)
+            row["result"] = f"error: {exc}"
+            code = max(code, BAD_INPUT)
+        except Exception as exc:  # noqa: BLE001 - one line per failed run, keep going
+            _report(exc, f"analysis of {store} failed", verbose)
+            row["result"] = f"failed: {type(exc).__name__}: {exc}"
+            code = max(code, FAILED)
+        _state["rows"].append(row)
+    if len(stores) > 1:
+        write_table(Path.cwd(), _state["rows"][-len(stores):])
+    return code
+
+
+def _report(exc: Exception, what: str, verbose: bool) -> None:
+    if verbose:
+        traceback.print_exception(exc)
+    print(f"{what}: {exc}", file=sys.stderr)
+
+
+def write_table(root: Path, rows: list[dict]) -> None:
+    """``analysis_summary.csv`` and ``analysis_summary.md`` in ``root``."""
+    columns = list(dict.fromkeys(k for r in rows for k in r))
+    with open(root / "analysis_summary.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=columns)
+        w.writeheader()
+        w.writerows(rows)
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    for r in rows:
+        cells = [f"{r.get(c):.4g}" if isinstance(r.get(c), float) else str(r.get(c, "")).replace("|", "\\|")
+                 for c in columns]
+        lines.append("| " + " | ".join(cells) + " |")
+    (root / "analysis_summary.md").write_text("\n".join(lines) + "\n")
+    print(f"summary of {len(rows)} runs: {root / 'analysis_summary.md'}")
+
+
+class SummaryTable(Callback):
+    """After ``-m``: one table of every analysed run."""
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        if len(_state["rows"]) > 1:
+            write_table(Path.cwd(), _state["rows"])
+
+
+@hydra.main(config_path=str(CONF_DIR), config_name="analyze", version_base=None)
+def _app(cfg) -> None:
+    from omegaconf import OmegaConf
+    run = OmegaConf.select(cfg, "run", default=None)
+    if run is None or OmegaConf.is_missing(cfg, "run"):
+        print("error: run: expected run=PATH (a run.zarr or a directory of runs)", file=sys.stderr)
+        _state["code"] = BAD_INPUT
+        return
+    _state["code"] = max(_state["code"], analyse_paths(str(run), cfg.analysis, bool(cfg.get("verbose"))))
+
+
+def main() -> None:
+    try:
+        _app()
+    except SystemExit:
+        raise
+    sys.exit(_state["code"])
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

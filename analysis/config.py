@@ -1,0 +1,216 @@
+"""The ``analysis`` config node → validated :class:`AnalysisConfig` (and a ``TactileConfig``).
+
+The node is the ``analysis`` group of the composed Hydra config (``conf/analysis/default.yaml``),
+an OmegaConf ``DictConfig`` or a plain dict. Missing keys take the defaults below; unknown keys
+and wrong types are :class:`AnalysisConfigError` naming the key (``analysis.segmentation.xxx``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+from tactile import flow as tflow
+from tactile.pipeline import TactileConfig
+
+
+class AnalysisConfigError(ValueError):
+    """A bad analysis parameter; the message names the key."""
+
+
+@dataclass(frozen=True)
+class Segmentation:
+    smooth_s: float = 0.05
+    contact_threshold_sigma: float = 6.0
+    contact_min_pdc: float = 3.0
+    contact_min_proxy: float = 1.5
+    prominence_pdc: float = 20.0
+    prominence_proxy: float = 2.0
+    min_contact_s: float = 0.1
+    merge_gap_s: float = 0.05
+    prominence: float = 0.25
+    distance_s: float = 0.5
+    plateau_level: float = 0.5
+    margin_s: float = 0.2
+    settle_frames: int = 10
+
+
+@dataclass(frozen=True)
+class Estimates:
+    width_signal: str = "proxy"
+    min_speed_mm_s: float = 0.5
+
+
+@dataclass(frozen=True)
+class Pour:
+    rotation_rad: float = 0.03
+    trough_prominence: float = 0.15
+
+
+@dataclass(frozen=True)
+class AnalysisConfig:
+    """Every analysis parameter (units in ``conf/analysis/default.yaml``)."""
+
+    enabled: bool = True
+    tactile: TactileConfig = field(default_factory=TactileConfig)
+    views: tuple[str, ...] = ("bottom", "left", "right")
+    baseline_fallback_window_s: float = 0.5
+    baseline_fallback_contact_min: float = 20.0
+    pressure_signal: str = "auto"
+    segmentation: Segmentation = field(default_factory=Segmentation)
+    estimates: Estimates = field(default_factory=Estimates)
+    pour: Pour = field(default_factory=Pour)
+    save_fields: bool = False
+    figures: bool = True
+    max_segment_figures: int = 12
+    progress: bool = True
+    raw: dict = field(default_factory=dict, compare=False)   # the node as given (for provenance)
+
+
+_TACTILE_KEYS = {"kalman_r": float, "kalman_q": float, "smooth": bool, "sigma": float, "kernel": str,
+                 "geodesic": str, "mesh_spacing": float, "scale": float, "render": str, "size": list,
+                 "intensity_range": list, "noise": float, "chunk": int}
+_FLOW_KEYS = {"method": str, "pyr_scale": float, "levels": int, "winsize": int, "iterations": int,
+              "poly_n": int, "poly_sigma": float, "flags": int, "dis_preset": int, "dis": dict, "tvl1": dict}
+
+
+def _plain(node) -> dict:
+    if node is None:
+        return {}
+    try:
+        from omegaconf import DictConfig, OmegaConf
+        if isinstance(node, DictConfig):
+            return OmegaConf.to_container(node, resolve=True)
+    except ImportError:  # pragma: no cover
+        pass
+    if not isinstance(node, dict):
+        raise AnalysisConfigError(f"analysis: expected a mapping, got {type(node).__name__}")
+    return json.loads(json.dumps(node))
+
+
+def _typed(key: str, value, kind):
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise AnalysisConfigError(f"analysis.{key}: expected true or false, got {value!r}")
+        return value
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise AnalysisConfigError(f"analysis.{key}: expected an integer, got {value!r}")
+        return value
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise AnalysisConfigError(f"analysis.{key}: expected a number, got {value!r}")
+        return float(value)
+    if kind is str:
+        if not isinstance(value, str):
+            raise AnalysisConfigError(f"analysis.{key}: expected a string, got {value!r}")
+        return value
+    if kind in (list, dict) and not isinstance(value, kind):
+        raise AnalysisConfigError(f"analysis.{key}: expected a {kind.__name__}, got {value!r}")
+    return value
+
+
+def _section(cls, prefix: str, values: dict):
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(values) - set(fields))
+    if unknown:
+        raise AnalysisConfigError(f"analysis.{prefix}.{unknown[0]}: unknown key; expected one of {sorted(fields)}")
+    out = {}
+    for name, value in values.items():
+        kind = type(fields[name].default)
+        out[name] = _typed(f"{prefix}.{name}", value, kind)
+    return cls(**out)
+
+
+def _positive(key: str, value: float) -> None:
+    if not value > 0:
+        raise AnalysisConfigError(f"analysis.{key}: expected a value > 0, got {value!r}")
+
+
+def load_config(node=None) -> AnalysisConfig:
+    """Validate the ``analysis`` node (DictConfig, dict or None for the defaults)."""
+    raw = _plain(node)
+    d = dict(raw)
+    known = {"enabled", "tactile", "views", "flow", "baseline", "pressure", "segmentation", "estimates",
+             "pour", "save_fields", "figures", "max_segment_figures", "progress"}
+    unknown = sorted(set(d) - known)
+    if unknown:
+        raise AnalysisConfigError(f"analysis.{unknown[0]}: unknown key; expected one of {sorted(known)}")
+    tac = d.get("tactile") or {}
+    bad = sorted(set(tac) - set(_TACTILE_KEYS))
+    if bad:
+        raise AnalysisConfigError(f"analysis.tactile.{bad[0]}: unknown key; expected one of {sorted(_TACTILE_KEYS)}")
+    fl = d.get("flow") or {}
+    bad = sorted(set(fl) - set(_FLOW_KEYS))
+    if bad:
+        raise AnalysisConfigError(f"analysis.flow.{bad[0]}: unknown key; expected one of {sorted(_FLOW_KEYS)}")
+    views = d.get("views", ["bottom", "left", "right"])
+    if not isinstance(views, list) or not views or not all(isinstance(v, str) for v in views):
+        raise AnalysisConfigError(f"analysis.views: expected a non-empty list of view names, got {views!r}")
+    tk = {k: _typed(f"tactile.{k}", v, _TACTILE_KEYS[k]) for k, v in tac.items()}
+    for k in ("size", "intensity_range"):
+        if k in tk:
+            if len(tk[k]) != 2:
+                raise AnalysisConfigError(f"analysis.tactile.{k}: expected two numbers, got {tk[k]!r}")
+            tk[k] = tuple(int(x) for x in tk[k]) if k == "size" else tuple(float(x) for x in tk[k])
+    for k in ("kalman_r", "kalman_q", "sigma", "mesh_spacing"):
+        if k in tk:
+            _positive(f"tactile.{k}", tk[k])
+    try:
+        fk = {k: _typed(f"flow.{k}", v, _FLOW_KEYS[k]) for k, v in fl.items()}
+        flow_cfg = tflow.FlowConfig(**fk)
+        tactile = TactileConfig(**tk, views=tuple(views), flow=flow_cfg)
+    except AnalysisConfigError:
+        raise
+    except (ValueError, TypeError) as exc:
+        msg = str(exc)
+        raise AnalysisConfigError(msg if msg.startswith("analysis.") else f"analysis.{msg}") from None
+    seg = _section(Segmentation, "segmentation", d.get("segmentation") or {})
+    for k in ("smooth_s", "min_contact_s", "distance_s", "contact_threshold_sigma"):
+        _positive(f"segmentation.{k}", getattr(seg, k))
+    if not 0 < seg.prominence < 1:
+        raise AnalysisConfigError(f"analysis.segmentation.prominence: expected a fraction in (0, 1), got {seg.prominence}")
+    if not 0 < seg.plateau_level < 1:
+        raise AnalysisConfigError(f"analysis.segmentation.plateau_level: expected a fraction in (0, 1), "
+                                  f"got {seg.plateau_level}")
+    if seg.settle_frames < 1:
+        raise AnalysisConfigError(f"analysis.segmentation.settle_frames: expected an integer ≥ 1, got {seg.settle_frames}")
+    est = _section(Estimates, "estimates", d.get("estimates") or {})
+    if est.width_signal not in ("proxy", "pdc"):
+        raise AnalysisConfigError(f"analysis.estimates.width_signal: expected proxy or pdc, got {est.width_signal!r}")
+    pour = _section(Pour, "pour", d.get("pour") or {})
+    _positive("pour.rotation_rad", pour.rotation_rad)
+    base = d.get("baseline") or {}
+    if set(base) - {"fallback_window_s", "fallback_contact_min"}:
+        raise AnalysisConfigError(f"analysis.baseline."
+                                  f"{sorted(set(base) - {'fallback_window_s', 'fallback_contact_min'})[0]}: unknown key")
+    window = _typed("baseline.fallback_window_s", base.get("fallback_window_s", 0.5), float)
+    _positive("baseline.fallback_window_s", window)
+    fb_min = _typed("baseline.fallback_contact_min", base.get("fallback_contact_min", 20.0), float)
+    _positive("baseline.fallback_contact_min", fb_min)
+    pres = d.get("pressure") or {}
+    if set(pres) - {"signal"}:
+        raise AnalysisConfigError(f"analysis.pressure.{sorted(set(pres) - {'signal'})[0]}: unknown key")
+    signal = _typed("pressure.signal", pres.get("signal", "auto"), str)
+    if signal not in ("auto", "pdc", "proxy"):
+        raise AnalysisConfigError(f"analysis.pressure.signal: expected auto, pdc or proxy, got {signal!r}")
+    top = {k: _typed(k, d[k], t) for k, t in (("enabled", bool), ("save_fields", bool), ("figures", bool),
+                                              ("max_segment_figures", int), ("progress", bool)) if k in d}
+    return AnalysisConfig(tactile=tactile, views=tuple(views), baseline_fallback_window_s=window,
+                          baseline_fallback_contact_min=fb_min,
+                          pressure_signal=signal, segmentation=seg, estimates=est, pour=pour, raw=raw, **top)
+
+
+def as_dict(cfg: AnalysisConfig) -> dict[str, Any]:
+    """The effective configuration, JSON-ready (for provenance and the history)."""
+    def conv(x):
+        if dataclasses.is_dataclass(x):
+            return {f.name: conv(getattr(x, f.name)) for f in dataclasses.fields(x) if f.name != "raw"}
+        if isinstance(x, (tuple, list)):
+            return [conv(v) for v in x]
+        if isinstance(x, dict):
+            return {str(k): conv(v) for k, v in x.items()}
+        return x
+    return conv(cfg)

@@ -1,0 +1,180 @@
+"""Segments and their labels, assigned from the data.
+
+The protocol declares its labels (root attribute ``labels``); which scheme applies follows
+from them:
+
+- **sweep** (labels include ``during``): per finger, ``approach`` (start of the record to its
+  first contact), for every pressure bump (a feature crossed) ``before`` (contact start to
+  plateau), ``during`` (the plateau), ``after`` (plateau to contact end / the trough before the
+  next bump), and ``lift`` (last contact to the end);
+- **pour** (labels include ``initial_slip`` or ``rotation``): per grasp finger, over its main
+  contact, ``pour`` → ``initial_slip`` → ``rotation`` → ``downward`` → ``full_slip`` from the
+  onsets found by :func:`pour_phases`;
+- **generic** (anything else, e.g. an imported recording): ``contact`` and ``no_contact``
+  stretches and one ``all`` segment covering the whole contact.
+
+All indices are frame indices into the run's BioTac time axis; segments are ``[start, stop)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import segments as seg
+
+SWEEP, POUR, GENERIC = "sweep", "pour", "generic"
+POUR_PHASES = ("pour", "initial_slip", "rotation", "downward", "full_slip")
+
+
+@dataclass
+class Segment:
+    """One labelled stretch of one finger's record."""
+
+    label: str
+    finger: str
+    start: int
+    stop: int
+    feature: int = -1          # crossing index (sweeps), −1 otherwise
+    contact: int = -1          # index of the finger's contact, −1 if out of contact
+    id: int = -1
+
+    def frames(self) -> int:
+        return self.stop - self.start
+
+
+def scheme(labels) -> str:
+    labels = set(labels or [])
+    if "during" in labels:
+        return SWEEP
+    if labels & {"initial_slip", "rotation", "downward", "full_slip"}:
+        return POUR
+    return GENERIC
+
+
+def sweep_segments(finger: str, T: int, contacts, bumps_per_contact) -> list[Segment]:
+    """Approach, before/during/after for every bump, lift (see module doc)."""
+    out: list[Segment] = []
+    if not contacts:
+        return out
+    if contacts[0][0] > 0:
+        out.append(Segment("approach", finger, 0, contacts[0][0]))
+    feature = 0
+    for c, (bumps) in enumerate(bumps_per_contact):
+        for b in bumps:
+            i0, i1 = b.plateau
+            out.append(Segment("before", finger, b.start, i0, feature, c))
+            out.append(Segment("during", finger, i0, i1, feature, c))
+            out.append(Segment("after", finger, i1, b.stop, feature, c))
+            feature += 1
+    if contacts[-1][1] < T:
+        out.append(Segment("lift", finger, contacts[-1][1], T))
+    return out
+
+
+def generic_segments(finger: str, T: int, contacts) -> list[Segment]:
+    """``no_contact`` / ``contact`` stretches and one ``all`` over the whole contact."""
+    out: list[Segment] = []
+    pos = 0
+    for c, (a, b) in enumerate(contacts):
+        if a > pos:
+            out.append(Segment("no_contact", finger, pos, a))
+        out.append(Segment("contact", finger, a, b, contact=c))
+        pos = b
+    if contacts:
+        if pos < T:
+            out.append(Segment("no_contact", finger, pos, T))
+        out.append(Segment("all", finger, contacts[0][0], contacts[-1][1], contact=0))
+    return out
+
+
+@dataclass
+class PourPhases:
+    """Onsets (frame indices, None if not found) and why a phase was not found."""
+
+    onsets: dict
+    reasons: dict
+
+
+def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | None, rotation_rad: float,
+                trough_prominence: float, distance: int, level: float = 0.5, fast=None) -> PourPhases:
+    """Onsets of the pour phases of one grasp finger.
+
+    Args:
+        t: (T,) s. pressure: (T,) pressure above rest. contact: (a, b) the grasp contact.
+        reference: frame where the contact became established (static-flow reference) or None.
+        rotation: (T,) static-flow rotation (rad, curl/2; NaN outside the flow window).
+        pour_event: frame of the protocol's ``pour`` step, if recorded (refines the start).
+        rotation_rad: rotation that marks the rotation phase (onset by the tangent method).
+        trough_prominence: fraction of the contact's pressure range a trough must reach.
+        distance: minimum distance between troughs, frames.
+        level: the full slip starts when the pressure falls for good below this fraction of
+            its median over the contact.
+        fast: (T,) a less smoothed pressure for the full-slip edge (default ``pressure``).
+
+    - pour: the pour step if recorded inside the contact, else the contact reference;
+    - initial_slip: the first trough of the mean-shifted pressure after the pour start
+      (the bottle first gives);
+    - rotation: static-flow rotation beyond ``rotation_rad``, moved back along its tangent;
+    - downward: the maximum of the pressure after the rotation (or pour) onset: the tangential
+      load stops growing because the grasp has begun to slide;
+    - full_slip: the last fall of the pressure below ``level`` × its contact median.
+    """
+    a, b = contact
+    p = np.asarray(pressure, float)
+    onsets, reasons = {}, {}
+    start = reference if reference is not None else a
+    if pour_event is not None and a <= pour_event < b:
+        start = max(start, pour_event)
+    onsets["pour"] = start
+    med = float(np.median(p[a:b]))
+    q = p if fast is None else np.asarray(fast, float)
+    below = np.flatnonzero(q[start:b] >= level * med)
+    full = start + int(below[-1]) + 1 if below.size else b
+    full = min(full, b)
+    # troughs of the mean-shifted pressure between pour start and the full slip
+    inner = p[start:full]
+    rng = float(np.ptp(inner)) if inner.size else 0.0
+    slip = None
+    if inner.size > 3 and rng > 0:
+        ex = seg.extrema(inner, 1.0, trough_prominence * rng, float(distance))
+        if ex.troughs.size:
+            slip = start + int(ex.troughs[0])
+    if slip is None:
+        reasons["initial_slip"] = "no pressure trough (the bottle giving) between the pour start and the full slip"
+    onsets["initial_slip"] = slip
+    rot = np.asarray(rotation, float)
+    valid = np.isfinite(rot)
+    r_on = None
+    if valid[start:full].sum() > 3:
+        r = np.where(valid, rot, 0.0)
+        r_on = seg.onset_by_tangent(t[:full], r[:full], rotation_rad, start=start)
+    if r_on is None:
+        reasons["rotation"] = f"static-flow rotation never exceeds {rotation_rad:g} rad"
+    onsets["rotation"] = r_on
+    after = max(x for x in (start, slip, r_on) if x is not None)
+    down = None
+    if full - after > 3:
+        down = after + int(np.argmax(p[after:full]))
+        if down >= full - 2:
+            down = None
+    if down is None:
+        reasons["downward"] = "no pressure maximum before the full slip"
+    onsets["downward"] = down
+    onsets["full_slip"] = full if b < len(p) else None
+    if onsets["full_slip"] is None:
+        reasons["full_slip"] = "the grasp holds until the record ends"
+    return PourPhases(onsets, reasons)
+
+
+def pour_segments(finger: str, T: int, phases: PourPhases, contact, contact_index: int, margin: int):
+    """Segments from the onsets; a phase ends where the next found phase begins."""
+    found = [(name, phases.onsets[name]) for name in POUR_PHASES if phases.onsets.get(name) is not None]
+    found.sort(key=lambda x: x[1])
+    out = []
+    end = min(T, contact[1] + margin)
+    for i, (name, s) in enumerate(found):
+        e = found[i + 1][1] if i + 1 < len(found) else (end if name == "full_slip" else contact[1])
+        out.append(Segment(name, finger, int(s), int(e), contact=contact_index))
+    return out

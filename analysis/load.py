@@ -1,0 +1,207 @@
+"""Read a run store (``run.zarr``) into plain arrays: :class:`RunData`.
+
+Only this module knows the store's layout (docs/run_store.md). It never reads the ``truth``
+group (that is :mod:`analysis.score`'s business, after the analysis).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+class AnalysisInputError(ValueError):
+    """The input cannot be analysed at all (not a run store, no tactile data)."""
+
+
+@dataclass
+class Events:
+    time: np.ndarray             # (E,) s since run start
+    kind: list[str]
+    name: list[str]
+    detail: list[dict]
+
+    def of_kind(self, kind: str) -> list[tuple[float, str, dict]]:
+        return [(float(t), n, d) for t, k, n, d in zip(self.time, self.kind, self.name, self.detail) if k == kind]
+
+
+@dataclass
+class RunData:
+    """One run's data as numpy arrays. Times are seconds since run start.
+
+    Attributes:
+        path: the store.
+        time: (T,) BioTac frame times, s.
+        fingers: finger names along axis 1 of ``electrodes``.
+        electrodes: (T, F, 24) raw counts (float64; invalid frames removed).
+        pdc: (T, F) PDC counts or ``None`` (records with electrodes only).
+        baseline_counts: (F, 24) stored unloaded electrode counts (an imported recording's
+            calibration or estimate, ``biotac/baseline``) or ``None``.
+        arm_time, tcp_pose, tcp_speed: (A,), (A, 6) m/rad, (A, 6) m/s, rad/s, or ``None``.
+        events: the event table (empty if the group is missing).
+        attrs: root attributes; ``protocol``, ``labels``, ``status``.
+        config: the run's resolved config (from provenance) or {}.
+        missing: groups that were absent, with what that costs.
+        input_sha256: checksum of the arrays the analysis reads.
+    """
+
+    path: Path
+    time: np.ndarray
+    fingers: list[str]
+    electrodes: np.ndarray
+    pdc: np.ndarray | None
+    arm_time: np.ndarray | None
+    tcp_pose: np.ndarray | None
+    tcp_speed: np.ndarray | None
+    events: Events
+    attrs: dict
+    config: dict
+    missing: dict = field(default_factory=dict)
+    input_sha256: str = ""
+    dropped_invalid: int = 0
+    baseline_counts: np.ndarray | None = None
+
+    @property
+    def protocol(self) -> str | None:
+        return self.attrs.get("protocol")
+
+    @property
+    def labels(self) -> list[str]:
+        return list(self.attrs.get("labels") or [])
+
+    @property
+    def status(self) -> str:
+        return str(self.attrs.get("status", "unknown"))
+
+    @property
+    def rate_hz(self) -> float:
+        """Nominal frame rate (median of the frame intervals)."""
+        if len(self.time) < 2:
+            return 100.0
+        return float(1.0 / np.median(np.diff(self.time)))
+
+    def fingertip_rotvec(self, finger: str) -> np.ndarray | None:
+        """Rotation vector (3,) of the sensor frame in the TCP frame, from the run's config."""
+        tips = ((self.config.get("hardware") or {}).get("fingertips") or {})
+        pose = tips.get(finger)
+        return None if pose is None else np.asarray(pose[3:6], float)
+
+    def gravity_sensor(self) -> np.ndarray | None:
+        """Direction of gravity in the sensor frame during a pour (hardware.pour.gravity_sensor)."""
+        g = ((self.config.get("hardware") or {}).get("pour") or {}).get("gravity_sensor")
+        if g is None:
+            return None
+        g = np.asarray(g, float)
+        n = np.linalg.norm(g)
+        return g / n if n > 0 else None
+
+
+def is_run_store(path: Path) -> bool:
+    return path.is_dir() and (path / "zarr.json").is_file()
+
+
+def load_run(path) -> RunData:
+    """Open ``path`` (a ``run.zarr``) and read what the analysis needs.
+
+    Raises :class:`AnalysisInputError` with one clear sentence when the path is not a run
+    store or holds no usable tactile data. Missing optional groups (arm, events) are listed
+    in ``RunData.missing``.
+    """
+    import xarray as xr
+    path = Path(path)
+    if not path.exists():
+        raise AnalysisInputError(f"{path}: no such file or directory")
+    if not is_run_store(path):
+        raise AnalysisInputError(f"{path}: not a run store (expected a zarr v3 directory with zarr.json, "
+                                 f"as written by tactile-run)")
+    try:
+        dt = xr.open_datatree(str(path), engine="zarr", consolidated=True)
+    except Exception as exc:  # noqa: BLE001 - any reader error means: not readable as a run store
+        raise AnalysisInputError(f"{path}: cannot be read as a run store ({type(exc).__name__}: "
+                                 f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+    groups = set(dt.children)
+    if "biotac" not in groups:
+        raise AnalysisInputError(f"{path}: the run store has no biotac group; nothing to analyse")
+    b = dt["biotac"].to_dataset()
+    if "electrodes" not in b or "time" not in b.coords:
+        raise AnalysisInputError(f"{path}: biotac group without electrodes/time; nothing to analyse")
+    time = np.asarray(b["time"].values, float)
+    electrodes = np.asarray(b["electrodes"].values, float)
+    fingers = [str(f) for f in b["finger"].values]
+    pdc = np.asarray(b["pdc"].values, float) if "pdc" in b else None
+    baseline_counts = np.asarray(b["baseline"].values, float) if "baseline" in b else None
+    keep = np.ones(len(time), bool)
+    if "valid" in b:
+        keep &= np.asarray(b["valid"].values, bool)
+    keep &= np.all((electrodes >= 1) & (electrodes <= 4095), axis=(1, 2)) & np.isfinite(time)
+    if pdc is not None:
+        keep &= np.all(np.isfinite(pdc), axis=1)
+    if keep.size and len(time) > 1:
+        order_ok = np.r_[True, np.diff(time) > 0]
+        keep &= order_ok
+    dropped = int((~keep).sum())
+    time, electrodes = time[keep], electrodes[keep]
+    pdc = pdc[keep] if pdc is not None else None
+    if len(time) < 2:
+        raise AnalysisInputError(f"{path}: the run store holds {len(time)} valid tactile frame(s); nothing to analyse")
+
+    missing = {}
+    arm_time = tcp_pose = tcp_speed = None
+    if "arm" in groups:
+        a = dt["arm"].to_dataset()
+        if "tcp_pose" in a and a.sizes.get("time_arm", 0) > 1:
+            arm_time = np.asarray(a["time_arm"].values, float)
+            tcp_pose = np.asarray(a["tcp_pose"].values, float)
+            tcp_speed = np.asarray(a["tcp_speed"].values, float) if "tcp_speed" in a else None
+    if arm_time is None:
+        missing["arm"] = "no arm pose: world-frame directions and feature widths are skipped"
+    if "events" in groups:
+        e = dt["events"].to_dataset()
+        details = []
+        for s in (e["detail"].values if "detail" in e else []):
+            try:
+                details.append(json.loads(str(s)) if str(s) else {})
+            except json.JSONDecodeError:
+                details.append({"text": str(s)})
+        events = Events(np.asarray(e["time"].values, float) if "time" in e else np.zeros(0),
+                        [str(k) for k in e["kind"].values] if "kind" in e else [],
+                        [str(n) for n in e["name"].values] if "name" in e else [], details)
+    else:
+        events = Events(np.zeros(0), [], [], [])
+        missing["events"] = "no events: no tare stretch (baseline fallback used), no step boundaries"
+    attrs = dict(dt.attrs)
+    prov = attrs.get("provenance") or {}
+    if isinstance(prov, str):
+        try:
+            prov = json.loads(prov)
+        except json.JSONDecodeError:
+            prov = {}
+    config = prov.get("config") or {} if isinstance(prov, dict) else {}
+    h = hashlib.sha256()
+    for arr in (time, electrodes, pdc, arm_time, tcp_pose, tcp_speed, events.time):
+        if arr is not None:
+            h.update(np.ascontiguousarray(arr).tobytes())
+    h.update(json.dumps([events.kind, events.name], sort_keys=True).encode())
+    return RunData(path=path, time=time, fingers=fingers, electrodes=electrodes, pdc=pdc, arm_time=arm_time,
+                   tcp_pose=tcp_pose, tcp_speed=tcp_speed, events=events, attrs=attrs, config=config,
+                   missing=missing, input_sha256=h.hexdigest(), dropped_invalid=dropped,
+                   baseline_counts=baseline_counts)
+
+
+def open_truth(path):
+    """The ``truth`` group as {subgroup: {var: ndarray}} or ``None`` (for scoring only)."""
+    import xarray as xr
+    dt = xr.open_datatree(str(path), engine="zarr", consolidated=True)
+    if "truth" not in dt.children:
+        return None
+    out = {}
+    for name, node in dt["truth"].children.items():
+        ds = node.to_dataset()
+        out[name] = {v: np.asarray(ds[v].values) for v in ds.data_vars}
+    t0 = float(dt.attrs.get("t0_clock_s", 0.0) or 0.0)
+    out["_t0"] = t0
+    return out

@@ -1,0 +1,306 @@
+"""The analysis of one loaded run, in memory: contacts → flow → segments → aggregates → estimates.
+
+:func:`analyse` is the whole computation (no files); :mod:`analysis.run` wraps it with loading,
+writing, figures and scoring.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tactile import aggregate as tagg
+
+from . import estimates as est
+from . import flows as fl
+from . import labels as lab
+from . import segments as seg
+from .load import RunData
+from .preprocess import Prepared, prepare
+
+_MODELS: dict = {}
+
+
+def get_model(tactile_config):
+    """The :class:`tactile.pipeline.TactileModel` for a config, built once per process."""
+    from tactile.pipeline import TactileModel
+    key = repr(tactile_config)
+    if key not in _MODELS:
+        _MODELS[key] = TactileModel.build(tactile_config)
+    return _MODELS[key]
+
+
+@dataclass
+class Analysis:
+    """Everything computed for one run (see :mod:`analysis.results` for the stored layout)."""
+
+    run: RunData
+    prepared: Prepared
+    scheme: str
+    contacts: dict                       # finger → [(start, stop)]
+    thresholds: dict                     # finger → pressure threshold
+    extrema: dict                        # finger → seg.Extrema
+    bumps: dict                          # finger → [[Bump per contact]]
+    segments: list                       # [lab.Segment] with ids
+    skipped: list                        # [{"what", "finger", "reason", ...}]
+    aggregates: list                     # rows: segment id, view, kind, values
+    crossings: list                      # sweep estimates per crossing
+    pour: dict                           # pour estimates (onsets in s per finger and overall)
+    whole_run: list                      # rows: finger, view, kind, values
+    flows: list                          # [fl.ContactFlow]
+    timing: dict = field(default_factory=dict)
+
+
+def _threshold(prepared: Prepared, k: int, cfg) -> float:
+    s = cfg.segmentation
+    floor = s.contact_min_pdc if prepared.pressure_name == "pdc" else s.contact_min_proxy
+    if prepared.baseline_source != "tare":
+        # without a tare the rest level is only known up to the sensor's drift over the record
+        floor *= cfg.baseline_fallback_contact_min / s.contact_min_pdc
+    return max(s.contact_threshold_sigma * float(prepared.rest_noise[k]), floor)
+
+
+def analyse(run: RunData, cfg, model=None) -> Analysis:
+    """Run the whole computation on ``run`` with the validated config ``cfg`` (AnalysisConfig)."""
+    t_start = _time.perf_counter()
+    model = model or get_model(cfg.tactile)
+    s = cfg.segmentation
+    rate = run.rate_hz
+    T = len(run.time)
+    prepared = prepare(run, cfg, model)
+    t_prep = _time.perf_counter()
+    skipped: list[dict] = []
+    for group, why in run.missing.items():
+        skipped.append({"what": f"group {group}", "reason": why})
+    if run.status not in ("success", "unknown"):
+        skipped.append({"what": "run", "reason": f"run status is {run.status!r}: only the recorded part "
+                                                 f"({run.time[-1]:.2f} s) is analysed"})
+    scheme = lab.scheme(run.labels)
+    contacts, thresholds, extrema, bumps = {}, {}, {}, {}
+    for k, f in enumerate(run.fingers):
+        p = seg.smooth(prepared.pressure[:, k], rate, s.smooth_s)
+        thr = _threshold(prepared, k, cfg)
+        ivs = seg.contact_intervals(p, thr, rate, s.min_contact_s, s.merge_gap_s)
+        if not ivs:
+            continue
+        contacts[f], thresholds[f] = ivs, thr
+        absolute = s.prominence_pdc if prepared.pressure_name == "pdc" else s.prominence_proxy
+        rng = float(np.ptp(p))
+        extrema[f] = seg.extrema(p, rate, max(absolute, s.prominence * rng), s.distance_s)
+        bumps[f] = [seg.bumps(p, iv, extrema[f].peaks, s.plateau_level) for iv in ivs]
+    if not contacts:
+        skipped.append({"what": "run", "reason": "no finger in contact at any time: no segments, no flow"})
+    if scheme == lab.SWEEP:
+        # the 'during' plateau is measured on the width signal, so that the segment and the
+        # width estimate (plateau duration x speed) describe the same stretch
+        wsig = prepared.proxy if cfg.estimates.width_signal == "proxy" else prepared.pressure
+        for f in bumps:
+            k = run.fingers.index(f)
+            ws = seg.smooth(wsig[:, k], rate, s.smooth_s)
+            ps = seg.smooth(prepared.pressure[:, k], rate, s.smooth_s)
+            bumps[f] = [[seg.replateau(ws, ps, b, s.plateau_level) for b in bl] for bl in bumps[f]]
+
+    margin = int(round(s.margin_s * rate))
+    flows, flow_s = fl.compute(prepared, contacts, run.fingers, model, margin, thresholds, s.settle_frames,
+                               keep_fields=cfg.save_fields, progress=cfg.progress)
+    t_flow = _time.perf_counter()
+
+    segments: list[lab.Segment] = []
+    pour: dict = {}
+    if scheme == lab.SWEEP:
+        for f, ivs in contacts.items():
+            segments += lab.sweep_segments(f, T, ivs, bumps[f])
+    elif scheme == lab.POUR:
+        pour = _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin)
+    else:
+        for f, ivs in contacts.items():
+            segments += lab.generic_segments(f, T, ivs)
+    kept = []
+    for sg in segments:
+        if sg.frames() < 2:
+            skipped.append({"what": f"segment {sg.label}", "finger": sg.finger, "feature": sg.feature,
+                            "start_s": float(run.time[min(sg.start, T - 1)]), "frames": sg.frames(),
+                            "reason": "shorter than two frames: no flow"})
+            continue
+        kept.append(sg)
+    kept.sort(key=lambda x: (run.fingers.index(x.finger), x.start, x.stop))
+    for i, sg in enumerate(kept):
+        sg.id = i
+
+    aggregates = _segment_aggregates(run, prepared, kept, flows, model, rate, skipped)
+    crossings = _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) if scheme == lab.SWEEP else []
+    whole = _whole_run(flows, model, rate)
+    t_end = _time.perf_counter()
+    timing = {"prepare_s": t_prep - t_start, "flow_s": flow_s, "flow_stage_s": t_flow - t_prep,
+              "estimates_s": t_end - t_flow, "total_s": t_end - t_start,
+              "frames_processed": int(sum(cf.window[1] - cf.window[0] for cf in flows)) * len(model.plans),
+              "frames_total": T * len(run.fingers) * len(model.plans)}
+    return Analysis(run, prepared, scheme, contacts, thresholds, extrema, bumps, kept, skipped, aggregates,
+                    crossings, pour, whole, flows, timing)
+
+
+# ----------------------------------------------------------------------------- aggregates
+
+AGG_FIELDS = ("sensor_x", "sensor_y", "sensor_z", "magnitude", "direction", "curl", "divergence", "rotation",
+              "confidence")
+
+
+def _row(w) -> dict:
+    return {"sensor_x": float(w["sensor"][0]), "sensor_y": float(w["sensor"][1]), "sensor_z": float(w["sensor"][2]),
+            "magnitude": float(np.linalg.norm(w["sensor"])), "direction": w["direction"], "curl": w["curl"],
+            "divergence": w["divergence"], "rotation": w["rotation"], "confidence": w["confidence"]}
+
+
+def _segment_aggregates(run, prepared, segments, flows, model, rate, skipped) -> list[dict]:
+    rows = []
+    for sg in segments:
+        cf = fl.find(flows, sg.finger, sg.start, sg.stop)
+        k = run.fingers.index(sg.finger)
+        cop, _ = tagg.centre_of_pressure(prepared.activation[sg.start:sg.stop, k], model.taxels)
+        good = np.all(np.isfinite(cop), axis=1)
+        cop_mean = cop[good].mean(axis=0) if good.any() else np.full(3, np.nan)
+        cop_disp = cop[good][-1] - cop[good][0] if good.sum() > 1 else np.full(3, np.nan)
+        base = {"segment": sg.id, "cop": cop_mean, "cop_displacement": cop_disp}
+        if cf is None:
+            if sg.label not in ("approach", "lift", "no_contact"):
+                skipped.append({"what": f"flow of segment {sg.id} ({sg.label})", "finger": sg.finger,
+                                "reason": "segment not inside a contact window: no tactile flow computed"})
+            rows.append({**base, "flows": {}})
+            continue
+        per = {}
+        for v in cf.views:
+            for kind in ("dynamic", "static"):
+                w = fl.window_summary(cf, v, sg.start, sg.stop, model, rate, kind)
+                if w is not None:
+                    per[(v, kind)] = _row(w)
+        rows.append({**base, "flows": per})
+    return rows
+
+
+def _whole_run(flows, model, rate) -> list[dict]:
+    """Per finger and view: the mean over all in-contact frames (dynamic and static)."""
+    out = []
+    fingers = list(dict.fromkeys(cf.finger for cf in flows))
+    for f in fingers:
+        for v in model.plans:
+            for kind in ("dynamic", "static"):
+                rows, weights = [], []
+                for cf in flows:
+                    if cf.finger != f:
+                        continue
+                    w = fl.window_summary(cf, v, cf.contact[0], cf.contact[1], model, rate, kind)
+                    if w is not None:
+                        rows.append(_row(w))
+                        weights.append(cf.contact[1] - cf.contact[0])
+                if rows:
+                    wt = np.asarray(weights, float) / sum(weights)
+                    out.append({"finger": f, "view": v, "kind": kind,
+                                **{key: float(sum(r[key] * x for r, x in zip(rows, wt))) for key in AGG_FIELDS}})
+    return out
+
+
+# ----------------------------------------------------------------------------- estimates
+
+def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[dict]:
+    """One row per feature crossed: direction (sensor, world), width, height, texture angle."""
+    out = []
+    e = cfg.estimates
+    width_sig = prepared.proxy if e.width_signal == "proxy" else prepared.pressure
+    speed = None
+    if run.arm_time is not None and run.tcp_speed is not None:
+        speed = est.speed_mm_s(run.arm_time, run.tcp_speed, run.time)
+    for f, per_contact in bumps.items():
+        k = run.fingers.index(f)
+        feature = 0
+        sig = seg.smooth(width_sig[:, k], rate, cfg.segmentation.smooth_s)
+        for bl in per_contact:
+            for b in bl:
+                row = {"finger": f, "feature": feature, "peak_time": float(run.time[b.peak]),
+                       "start_time": float(run.time[b.start]), "end_time": float(run.time[min(b.stop, len(run.time) - 1)]),
+                       "plateau_start": float(run.time[b.plateau[0]]),
+                       "plateau_end": float(run.time[min(b.plateau[1], len(run.time) - 1)]),
+                       "height": b.height, "height_units": prepared.pressure_units}
+                feature += 1
+                cf = fl.find(flows, f, b.start, b.stop)
+                d_s = np.full(3, np.nan)
+                if cf is not None:
+                    vec = fl.combined_direction(cf, b.start, b.stop, model, rate)
+                    if np.linalg.norm(vec[:2]) > 0:
+                        d_s = est.motion_direction_sensor(vec)
+                        row["flow_speed_mm_s"] = float(np.linalg.norm(vec[:2]))
+                else:
+                    skipped.append({"what": "direction", "finger": f, "feature": row["feature"],
+                                    "reason": "no tactile flow over this crossing"})
+                row["direction_sensor"] = d_s
+                d_w = np.full(3, np.nan)
+                tip = run.fingertip_rotvec(f)
+                if run.tcp_pose is not None and tip is not None and np.all(np.isfinite(d_s)):
+                    pose = est.pose_at(run.arm_time, run.tcp_pose, float(run.time[b.peak]))
+                    d_w = est.unit(est.sensor_to_world(pose[3:], tip) @ d_s)
+                elif np.all(np.isfinite(d_s)):
+                    skipped.append({"what": "direction_world", "finger": f, "feature": row["feature"],
+                                    "reason": "no arm pose or no fingertip pose in the run's config"})
+                row["direction_world"] = d_w
+                if speed is not None:
+                    width, dur, v = est.feature_width(sig, b, run.time, speed, cfg.segmentation.plateau_level,
+                                                      e.min_speed_mm_s)
+                    row.update(width_mm=width, plateau_s=dur, speed_mm_s=v)
+                    if not np.isfinite(width):
+                        skipped.append({"what": "width", "finger": f, "feature": row["feature"],
+                                        "reason": f"TCP speed {v:.2f} mm/s below {e.min_speed_mm_s} mm/s"})
+                else:
+                    row.update(width_mm=float("nan"), plateau_s=float("nan"), speed_mm_s=float("nan"))
+                    skipped.append({"what": "width", "finger": f, "feature": row["feature"],
+                                    "reason": "no TCP speed recorded (arm group missing)"})
+                ridge = None
+                if cf is not None and "bottom" in cf.views:
+                    vr = cf.views["bottom"]
+                    ridge = est.ridge_axis(vr.frames[b.peak - cf.window[0]], model.plans["bottom"].mask,
+                                           model.plans["bottom"])
+                row["texture_angle_deg"] = est.texture_angle_deg(ridge, d_s)
+                out.append(row)
+    for f in {r["finger"] for r in out}:
+        rows = [r for r in out if r["finger"] == f]
+        for r, rank in zip(rows, est.height_ranks([r["height"] for r in rows])):
+            r["height_rank"] = int(rank)
+    return out
+
+
+def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dict:
+    """Pour phases per grasp finger (its longest contact) and the run's onsets (median)."""
+    rate = run.rate_hz
+    pour_event = None
+    for t, name, _ in run.events.of_kind("pour"):
+        pour_event = int(np.searchsorted(run.time, t))
+        break
+    per_finger = {}
+    for f, ivs in contacts.items():
+        k = run.fingers.index(f)
+        ci = int(np.argmax([b - a for a, b in ivs]))
+        a, b = ivs[ci]
+        cf = fl.find(flows, f, a, b)
+        rot = np.full(len(run.time), np.nan)
+        ref = None
+        if cf is not None and cf.reference is not None:
+            ref = cf.reference
+            parts = [cf.views[v].static for v in cf.views if cf.views[v].static is not None]
+            if parts:
+                curl = np.mean([p.curl for p in parts], axis=0) / 2.0
+                rot[cf.window[0]:cf.window[1]] = seg.smooth(curl, rate, 0.5)
+        p = seg.smooth(prepared.proxy[:, k], rate, 0.5)
+        fast = seg.smooth(prepared.proxy[:, k], rate, cfg.segmentation.smooth_s)
+        ph = lab.pour_phases(run.time, p, (a, b), ref, rot, pour_event, cfg.pour.rotation_rad,
+                             cfg.pour.trough_prominence, int(round(cfg.segmentation.distance_s * rate)),
+                             cfg.segmentation.plateau_level, fast=fast)
+        for name, why in ph.reasons.items():
+            skipped.append({"what": f"phase {name}", "finger": f, "reason": why})
+        segments += lab.pour_segments(f, len(run.time), ph, (a, b), ci, margin)
+        per_finger[f] = {n: (float(run.time[i]) if i is not None else None) for n, i in ph.onsets.items()}
+    overall = {}
+    for n in lab.POUR_PHASES:
+        vals = [v[n] for v in per_finger.values() if v.get(n) is not None]
+        overall[n] = float(np.median(vals)) if vals else None
+    return {"onsets": overall, "per_finger": per_finger,
+            "gravity_sensor": None if run.gravity_sensor() is None else run.gravity_sensor().tolist()}

@@ -1,0 +1,173 @@
+"""Analyse one run store and write the results beside it (the ``tactile_flow.analysis`` entry point).
+
+``analyze_run(store_path, analysis_cfg) -> dict`` (the summary) is what ``tactile-run`` calls
+when a run ends and what ``tactile-analyze`` calls per run. Outputs in the run directory
+(``store_path.parent``): ``analysis.zarr``, ``summary.json``, ``score.json`` (simulated runs,
+i.e. stores with a ``truth`` group), ``figures/*.png``, and ``analysis_history.jsonl`` (one line
+per replaced analysis: its config, provenance and headline). Everything is written into a
+staging directory first and then renamed into place (:func:`analysis.results.swap_in`), so a
+failure leaves the previous results untouched and never partial files.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+import uuid
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from . import figures as figs
+from . import results
+from . import score as scoring
+from .config import as_dict, load_config
+from .load import AnalysisInputError, load_run, open_truth
+from .pipeline import analyse, get_model
+
+SCHEMA_VERSION = "1.0"
+
+
+def code_version() -> dict:
+    """Package version and git commit (``unknown`` outside a git checkout)."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        pkg = version("tactile-flow")
+    except PackageNotFoundError:  # pragma: no cover
+        pkg = "unknown"
+    root = Path(__file__).resolve().parents[1]
+    commit, dirty = "unknown", None
+    try:
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                timeout=5).stdout.strip() or "unknown"
+        status = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--", "analysis", "tactile"],
+                                capture_output=True, text=True, timeout=5).stdout
+        dirty = bool(status.strip())
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return {"package": pkg, "git_commit": commit, "analysis_or_tactile_dirty": dirty}
+
+
+def _headline(a, score: dict | None) -> dict:
+    h = {"segments": len(a.segments), "skipped": len(a.skipped),
+         "fingers_in_contact": len(a.contacts), "status": "ok" if a.contacts else "no_contact"}
+    if a.crossings:
+        h["crossings"] = len(a.crossings)
+        widths = [c["width_mm"] for c in a.crossings if math.isfinite(c.get("width_mm", float("nan")))]
+        h["width_mm_median"] = float(np.median(widths)) if widths else None
+        d = np.array([c["direction_sensor"] for c in a.crossings], float)
+        d = d[np.all(np.isfinite(d), axis=1)]
+        if len(d):
+            m = d.mean(axis=0)
+            h["direction_sensor_deg"] = float(np.degrees(np.arctan2(m[1], m[0])))
+        ang = [c["texture_angle_deg"] for c in a.crossings if math.isfinite(c.get("texture_angle_deg", float("nan")))]
+        h["texture_angle_deg_median"] = float(np.median(ang)) if ang else None
+    if a.pour:
+        for k, v in a.pour["onsets"].items():
+            h[f"onset_{k}_s"] = v
+    if score:
+        s = score["summary"]
+        for k in ("direction_correct_fraction", "width_error_mm_median", "boundary_error_ms_median",
+                  "slip_onset_error_ms"):
+            if s.get(k) is not None:
+                h[f"score_{k}"] = s[k]
+        h["score_all_targets_met"] = score.get("all_targets_met")
+    return h
+
+
+def _segments_json(a) -> list[dict]:
+    rows = {r["segment"]: r for r in a.aggregates}
+    out = []
+    t = a.run.time
+    for sg in a.segments:
+        r = rows.get(sg.id, {})
+        flows = {f"{v}/{k}": vals for (v, k), vals in r.get("flows", {}).items()}
+        out.append({"id": sg.id, "label": sg.label, "finger": sg.finger, "feature": sg.feature,
+                    "start_s": float(t[sg.start]), "end_s": float(t[min(sg.stop, len(t) - 1)]),
+                    "frames": sg.frames(), "cop_mm": r.get("cop"), "cop_displacement_mm": r.get("cop_displacement"),
+                    "flow": flows})
+    return out
+
+
+def analyze_run(store_path, analysis_cfg=None, *, console=print) -> dict:
+    """Analyse ``store_path`` (a ``run.zarr``) with the ``analysis`` config node; write the outputs
+    beside it; return the summary dict. Raises :class:`AnalysisInputError` (nothing written) when
+    the input cannot be analysed at all, :class:`analysis.config.AnalysisConfigError` on bad
+    parameters."""
+    cfg = load_config(analysis_cfg)
+    store_path = Path(store_path)
+    if not cfg.enabled:
+        console(f"analysis: disabled (analysis.enabled=false); {store_path} not analysed")
+        return {"headline": {"status": "disabled"}}
+    run = load_run(store_path)
+    model = get_model(cfg.tactile)
+    a = analyse(run, cfg, model)
+    run_dir = store_path.parent
+    analysis_id = uuid.uuid4().hex
+    effective = as_dict(cfg)
+    provenance = {"analysis_id": analysis_id, "schema_version": SCHEMA_VERSION,
+                  "created": datetime.now(timezone.utc).isoformat().replace("+00:00", "Z"),
+                  "config": effective, "config_overrides": cfg.raw, "code": code_version(),
+                  "input": {"store": store_path.name, "run_id": run.attrs.get("run_id"),
+                            "sha256": run.input_sha256, "frames": len(run.time),
+                            "dropped_invalid_frames": run.dropped_invalid},
+                  "baseline": a.prepared.baseline_source, "pressure_signal": a.prepared.pressure_name}
+    score = None
+    truth = open_truth(store_path)
+    if truth is not None:
+        score = scoring.score(a, truth)
+        score["analysis_id"] = analysis_id
+    summary = {"analysis_id": analysis_id, "run": str(store_path), "protocol": run.protocol,
+               "run_status": run.status, "scheme": a.scheme, "labels": run.labels,
+               "headline": _headline(a, score), "provenance": provenance,
+               "contacts": {f: [[float(run.time[s]), float(run.time[min(e, len(run.time) - 1)])] for s, e in ivs]
+                            for f, ivs in a.contacts.items()},
+               "segments": _segments_json(a), "estimates": {"crossings": a.crossings, "pour": a.pour},
+               "whole_run": a.whole_run, "skipped": a.skipped, "timing": a.timing}
+    staging = run_dir / f".analysis-staging-{analysis_id[:8]}"
+    staging.mkdir()
+    try:
+        tree = results.to_datatree(a, list(model.plans), {"analysis_id": analysis_id,
+                                                          "provenance": json.loads(results.dumps(provenance))},
+                                   fields=cfg.save_fields)
+        results.write_store(tree, staging / "analysis.zarr")
+        if cfg.figures:
+            summary["figures"] = figs.make_all(a, model, staging / "figures", cfg)
+        if score is not None:
+            (staging / "score.json").write_text(results.dumps(score))
+        (staging / "summary.json").write_text(results.dumps(summary))
+        previous = _previous_record(run_dir)
+        results.swap_in(staging, run_dir, previous)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    _report(console, run_dir, summary, score)
+    return json.loads(results.dumps(summary))
+
+
+def _previous_record(run_dir: Path) -> dict | None:
+    old = run_dir / "summary.json"
+    if not old.exists():
+        return None
+    try:
+        s = json.loads(old.read_text())
+    except (OSError, json.JSONDecodeError):
+        return {"replaced": datetime.now(timezone.utc).isoformat(), "note": "previous summary.json unreadable"}
+    return {"replaced": datetime.now(timezone.utc).isoformat(), "analysis_id": s.get("analysis_id"),
+            "provenance": s.get("provenance"), "headline": s.get("headline")}
+
+
+def _report(console, run_dir, summary, score) -> None:
+    h = summary["headline"]
+    msg = f"analysis {run_dir}: {h['segments']} segments, {h['skipped']} skipped"
+    if h.get("status") == "no_contact":
+        msg += " (no contact found: nothing to segment)"
+    if score is not None:
+        msg += f"; score: targets {'met' if score.get('all_targets_met') else 'NOT all met'}"
+    console(msg)
+
+
+__all__ = ["analyze_run", "AnalysisInputError"]

@@ -1,0 +1,183 @@
+"""Score an analysis against the simulator's ground truth (the run store's ``truth`` group).
+
+Called only after the analysis is complete; nothing here feeds back into it.
+
+Matching: each truth feature crossing (finger, ``centre_time``) is matched to the estimated
+crossing of the same finger with the nearest pressure peak (within 1 s). Truth times are on the
+simulated clock; ``t0_clock_s`` is subtracted.
+
+Scores:
+- direction: angle between the estimated and true direction of motion (sensor and world
+  frame); correct if ≤ 30°;
+- width: |estimated − true width| (mm);
+- height ranking: every pair of features of different true heights (> 5 % apart) ordered
+  correctly (pairs of equal height are not scored);
+- texture angle: |estimated − true| (deg), true = angle between the feature's long axis and the
+  sweep direction in the world frame, folded into 0..90°;
+- boundaries (ms): ``before`` start vs the truth contact start, ``after`` end vs the contact
+  end, ``during`` start/end vs the times the pad's lowest point passes the feature's edges
+  (centre_time ∓ width / 2 / speed); pour phase onsets vs the truth onsets;
+- slip onset (ms): the ``initial_slip`` onset vs the truth ``slip_onset``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import estimates as est
+
+TARGETS = {"direction_correct_fraction": 1.0, "width_error_mm_median": 1.0, "boundary_error_ms_median": 50.0,
+           "slip_onset_error_ms": 100.0}
+DIRECTION_OK_DEG = 30.0
+
+
+def _s(x):
+    return str(x)
+
+
+def score(analysis, truth: dict) -> dict:
+    """Score dict (JSON-ready apart from NaN) for a finished analysis and the truth dict
+    from :func:`analysis.load.open_truth`."""
+    t0 = truth.get("_t0", 0.0)
+    out = {"crossings": [], "pour": {}, "summary": {}, "targets": {}}
+    fc = truth.get("feature_crossings", {})
+    feats = truth.get("features", {})
+    sweeps = truth.get("sweeps", {})
+    contacts = truth.get("contacts", {})
+    names = [_s(n) for n in np.atleast_1d(feats.get("name", []))]
+    boundary_ms = []
+    cr = analysis.crossings
+    seg_by = {}
+    for sg in analysis.segments:
+        seg_by.setdefault((sg.finger, sg.feature, sg.label), sg)
+    time = analysis.run.time
+    for i in range(len(np.atleast_1d(fc.get("centre_time", [])))):
+        finger = _s(fc["finger"][i])
+        centre = float(fc["centre_time"][i]) - t0
+        name = _s(fc["feature"][i])
+        row = {"finger": finger, "feature": name, "centre_time": centre}
+        cands = [c for c in cr if c["finger"] == finger]
+        if not cands:
+            row["matched"] = False
+            out["crossings"].append(row)
+            continue
+        c = min(cands, key=lambda c: abs(c["peak_time"] - centre))
+        if abs(c["peak_time"] - centre) > 1.0:
+            row["matched"] = False
+            out["crossings"].append(row)
+            continue
+        row.update(matched=True, estimate=c["feature"], peak_time_error_ms=1e3 * (c["peak_time"] - centre))
+        # the sweep this crossing belongs to
+        sw = None
+        for j in range(len(np.atleast_1d(sweeps.get("start", [])))):
+            if _s(sweeps["finger"][j]) == finger and sweeps["start"][j] - t0 <= centre <= sweeps["end"][j] - t0:
+                sw = j
+        if sw is not None:
+            d_s, d_w = np.asarray(sweeps["dir_sensor"][sw], float), np.asarray(sweeps["dir_world"][sw], float)
+            row["direction_error_deg"] = est.angle_deg(c["direction_sensor"], d_s)
+            row["direction_world_error_deg"] = est.angle_deg(c["direction_world"], d_w)
+            row["direction_correct"] = bool(row["direction_error_deg"] <= DIRECTION_OK_DEG)
+            speed = float(sweeps["speed_m_s"][sw]) * 1e3
+        else:
+            d_w, speed = None, float("nan")
+        if name in names:
+            k = names.index(name)
+            width = float(feats["width_m"][k]) * 1e3
+            row.update(true_width_mm=width, true_height_mm=float(feats["height_m"][k]) * 1e3)
+            row["width_error_mm"] = abs(c.get("width_mm", float("nan")) - width)
+            row["estimated_width_mm"] = c.get("width_mm")
+            if d_w is not None:
+                a = float(feats["angle_rad"][k])
+                axis = np.array([math.cos(a), math.sin(a), 0.0])
+                true_angle = math.degrees(math.acos(min(1.0, abs(float(axis @ est.unit(d_w))))))
+                row["true_texture_angle_deg"] = true_angle
+                row["texture_angle_error_deg"] = abs(c.get("texture_angle_deg", float("nan")) - true_angle)
+            # boundaries
+            errs = {}
+            for j in range(len(np.atleast_1d(contacts.get("start", [])))):
+                s, e = float(contacts["start"][j]) - t0, float(contacts["end"][j]) - t0
+                if _s(contacts["finger"][j]) == finger and s <= centre <= e:
+                    before = seg_by.get((finger, c["feature"], "before"))
+                    after = seg_by.get((finger, c["feature"], "after"))
+                    if before is not None:
+                        errs["contact_start"] = 1e3 * (time[before.start] - s)
+                    if after is not None:
+                        errs["contact_end"] = 1e3 * (_seg_end(time, after) - e)
+            during = seg_by.get((finger, c["feature"], "during"))
+            if during is not None and speed > 0:
+                half = width / 2.0 / speed
+                errs["during_start"] = 1e3 * (time[during.start] - (centre - half))
+                errs["during_end"] = 1e3 * (_seg_end(time, during) - (centre + half))
+            row["boundary_errors_ms"] = errs
+            boundary_ms += [abs(v) for v in errs.values()]
+        out["crossings"].append(row)
+    # height ranking
+    pairs = ok = 0
+    matched = [r for r in out["crossings"] if r.get("matched") and "true_height_mm" in r]
+    for i in range(len(matched)):
+        for j in range(i + 1, len(matched)):
+            a, b = matched[i], matched[j]
+            if a["finger"] != b["finger"]:
+                continue
+            ha, hb = a["true_height_mm"], b["true_height_mm"]
+            if abs(ha - hb) <= 0.05 * max(ha, hb):
+                continue
+            ea = next(c for c in cr if c["finger"] == a["finger"] and c["feature"] == a["estimate"])
+            eb = next(c for c in cr if c["finger"] == b["finger"] and c["feature"] == b["estimate"])
+            pairs += 1
+            ok += (ha > hb) == (ea["height"] > eb["height"])
+    # pour
+    tp = truth.get("pour", {})
+    slip_err = None
+    if analysis.pour:
+        on = analysis.pour["onsets"]
+        for phase, key in (("pour", "pour_start"), ("initial_slip", "slip_onset"), ("rotation", "rotation"),
+                           ("downward", "downward"), ("full_slip", "full_slip")):
+            tv = float(np.asarray(tp.get(key, np.nan))) - t0 if key in tp else float("nan")
+            ev = on.get(phase)
+            err = None if ev is None or not math.isfinite(tv) else 1e3 * (ev - tv)
+            out["pour"][phase] = {"true_s": tv if math.isfinite(tv) else None, "estimated_s": ev, "error_ms": err,
+                                  "reason": None if ev is not None else "phase not detected"}
+            if err is not None:
+                boundary_ms.append(abs(err))
+        slip_err = out["pour"]["initial_slip"]["error_ms"]
+    rows = [r for r in out["crossings"] if r.get("matched")]
+    dirs = [r["direction_correct"] for r in rows if "direction_correct" in r]
+    widths = [r["width_error_mm"] for r in rows if math.isfinite(r.get("width_error_mm", float("nan")))]
+    angles = [r["texture_angle_error_deg"] for r in rows if math.isfinite(r.get("texture_angle_error_deg", float("nan")))]
+    n_truth = len(out["crossings"])
+    s = {"crossings_true": n_truth, "crossings_matched": len(rows),
+         "crossings_estimated": len(cr),
+         "direction_correct_fraction": (sum(dirs) / n_truth) if n_truth else None,
+         "direction_error_deg_max": max((r["direction_error_deg"] for r in rows if "direction_error_deg" in r), default=None),
+         "direction_world_error_deg_max": max((r["direction_world_error_deg"] for r in rows
+                                               if "direction_world_error_deg" in r), default=None),
+         "width_error_mm_median": float(np.median(widths)) if widths else None,
+         "width_error_mm_max": float(np.max(widths)) if widths else None,
+         "texture_angle_error_deg_median": float(np.median(angles)) if angles else None,
+         "height_pairs_scored": pairs, "height_ranking_correct": (ok == pairs) if pairs else None,
+         "height_ranking_note": None if pairs else "all features have the same height: ranking not scored",
+         "boundary_error_ms_median": float(np.median(boundary_ms)) if boundary_ms else None,
+         "boundary_error_ms_max": float(np.max(boundary_ms)) if boundary_ms else None,
+         "slip_onset_error_ms": slip_err}
+    out["summary"] = s
+    for key, limit in TARGETS.items():
+        v = s.get(key)
+        applicable = not (key == "slip_onset_error_ms" and not analysis.pour) and \
+            not (key in ("direction_correct_fraction", "width_error_mm_median") and not n_truth)
+        if not applicable:
+            continue
+        if v is None:
+            out["targets"][key] = {"target": limit, "value": None, "met": False, "reason": "not measured"}
+        elif key == "direction_correct_fraction":
+            out["targets"][key] = {"target": limit, "value": v, "met": v >= limit}
+        else:
+            out["targets"][key] = {"target": limit, "value": v, "met": abs(v) <= limit}
+    out["all_targets_met"] = all(t["met"] for t in out["targets"].values()) if out["targets"] else None
+    return out
+
+
+def _seg_end(time, sg) -> float:
+    return float(time[sg.stop]) if sg.stop < len(time) else float(time[-1])

@@ -1,0 +1,180 @@
+"""Regions of interest from a pressure signal: contacts, peaks and troughs, feature bumps.
+
+Pure functions on 1-D arrays sampled at ``rate_hz``; indices are frame indices, intervals
+are half-open ``[start, stop)``. Durations are given in seconds and converted here, so the
+parameters keep their meaning at any frame rate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import find_peaks, savgol_filter
+
+
+def smooth(signal, rate_hz: float, window_s: float) -> np.ndarray:
+    """Savitzky–Golay (quadratic) smoothing over ``window_s`` seconds (odd ≥ 5 samples)."""
+    x = np.asarray(signal, float)
+    n = int(round(window_s * rate_hz)) | 1
+    n = max(n, 5)
+    if len(x) < n:
+        return x.copy()
+    return savgol_filter(x, n, 2)
+
+
+def contact_intervals(pressure, threshold: float, rate_hz: float, min_s: float = 0.1,
+                      merge_gap_s: float = 0.05) -> list[tuple[int, int]]:
+    """Intervals where ``pressure`` (T,) exceeds ``threshold``.
+
+    Intervals separated by less than ``merge_gap_s`` are merged; intervals shorter than
+    ``min_s`` are dropped. Returns [(start, stop), ...] frame indices, sorted.
+    """
+    p = np.asarray(pressure, float)
+    above = p > threshold
+    if not above.any():
+        return []
+    edges = np.diff(np.r_[0, above.astype(np.int8), 0])
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    gap = int(round(merge_gap_s * rate_hz))
+    merged: list[list[int]] = []
+    for a, b in zip(starts, stops):
+        if merged and a - merged[-1][1] <= gap:
+            merged[-1][1] = int(b)
+        else:
+            merged.append([int(a), int(b)])
+    n_min = max(1, int(round(min_s * rate_hz)))
+    return [(a, b) for a, b in merged if b - a >= n_min]
+
+
+@dataclass(frozen=True)
+class Extrema:
+    """Peaks and troughs of a mean-shifted signal (frame indices) and the prominence used."""
+
+    peaks: np.ndarray
+    troughs: np.ndarray
+    prominence: float
+    shifted: np.ndarray
+
+
+def extrema(signal, rate_hz: float, prominence: float, distance_s: float) -> Extrema:
+    """Peaks and troughs of ``signal − mean(signal)`` (``scipy.signal.find_peaks``).
+
+    ``prominence``: in the signal's units; ``distance_s``: minimum distance between two
+    peaks (or two troughs), seconds.
+    """
+    x = np.asarray(signal, float)
+    shifted = x - x.mean() if len(x) else x
+    dist = max(1, int(round(distance_s * rate_hz)))
+    peaks, _ = find_peaks(shifted, prominence=prominence, distance=dist)
+    troughs, _ = find_peaks(-shifted, prominence=prominence, distance=dist)
+    return Extrema(peaks.astype(int), troughs.astype(int), float(prominence), shifted)
+
+
+@dataclass(frozen=True)
+class Bump:
+    """One pressure bump (a feature under the finger) inside a contact.
+
+    ``start``/``stop``: the bump's extent (contact ends or the troughs between bumps);
+    ``plateau``: [i0, i1) where the pressure is above ``level`` × the bump's height;
+    ``peak``: index of the maximum; ``height``: pressure at the peak (signal units).
+    """
+
+    start: int
+    stop: int
+    peak: int
+    plateau: tuple[int, int]
+    height: float
+
+
+def _crossing(p, i, level, step) -> float:
+    """Fractional index where ``p`` crosses ``level`` walking from ``i`` by ``step`` (±1)."""
+    j = i
+    n = len(p)
+    while 0 <= j + step < n and p[j + step] >= level:
+        j += step
+    k = j + step
+    if not 0 <= k < n:
+        return float(j)
+    # linear interpolation between j (≥ level) and k (< level)
+    frac = (p[j] - level) / (p[j] - p[k]) if p[j] != p[k] else 0.0
+    return j + step * frac
+
+
+def bumps(pressure, contact: tuple[int, int], peaks, level: float = 0.5) -> list[Bump]:
+    """Split a contact [start, stop) at the minima between its ``peaks`` and find each plateau.
+
+    Each bump's plateau is the stretch around its peak where the pressure stays above
+    ``level`` × (peak − the bump's lowest edge value). Fractional plateau edges are
+    rounded to frames for the segments; :func:`plateau_duration` keeps the fraction.
+    """
+    p = np.asarray(pressure, float)
+    a, b = contact
+    pk = sorted(int(k) for k in peaks if a <= k < b)
+    if not pk:
+        if b - a < 1:
+            return []
+        pk = [a + int(np.argmax(p[a:b]))]
+    cuts = [a] + [pk[i] + int(np.argmin(p[pk[i]:pk[i + 1] + 1])) for i in range(len(pk) - 1)] + [b]
+    out = []
+    for i, k in enumerate(pk):
+        s, e = cuts[i], cuts[i + 1]
+        floor = min(p[s], p[e - 1], 0.0) if e > s else 0.0
+        height = p[k] - floor
+        lev = floor + level * height
+        lo, hi = _crossing(p, k, lev, -1), _crossing(p, k, lev, +1)
+        i0 = max(s, int(np.ceil(lo)))
+        i1 = min(e, int(np.floor(hi)) + 1)
+        out.append(Bump(start=s, stop=e, peak=k, plateau=(i0, max(i1, i0 + 1)), height=float(p[k])))
+    return out
+
+
+def replateau(signal, pressure, bump: Bump, level: float = 0.5) -> Bump:
+    """The bump's plateau centred where ``pressure``'s plateau is centred, as long as
+    ``signal``'s plateau lasts (both (T,); fractional edges, rounded to frames).
+
+    Used with the PDC as ``pressure`` (the whole-fingertip pressure, symmetric about the pad's
+    lowest point: where the feature is) and the pad electrodes' sum as ``signal`` (a sharper
+    footprint: how long the feature is under the pad)."""
+    def edges(x):
+        x = np.asarray(x, float)
+        k = bump.start + int(np.argmax(x[bump.start:bump.stop]))
+        floor = min(x[bump.start], x[bump.stop - 1], 0.0)
+        lev = floor + level * (x[k] - floor)
+        return _crossing(x, k, lev, -1), _crossing(x, k, lev, +1)
+    lo_p, hi_p = edges(pressure)
+    lo_s, hi_s = edges(signal)
+    c, half = (lo_p + hi_p) / 2.0, (hi_s - lo_s) / 2.0
+    i0 = max(bump.start, int(round(c - half)))
+    i1 = min(bump.stop, int(round(c + half)))
+    return Bump(bump.start, bump.stop, bump.peak, (i0, max(i1, i0 + 1)), bump.height)
+
+
+def plateau_duration(pressure, bump: Bump, rate_hz: float, level: float = 0.5) -> tuple[float, float, float]:
+    """Interpolated plateau (t_start, t_end, duration) in seconds relative to frame 0."""
+    p = np.asarray(pressure, float)
+    floor = min(p[bump.start], p[bump.stop - 1], 0.0)
+    lev = floor + level * (p[bump.peak] - floor)
+    lo, hi = _crossing(p, bump.peak, lev, -1), _crossing(p, bump.peak, lev, +1)
+    return lo / rate_hz, hi / rate_hz, (hi - lo) / rate_hz
+
+
+def onset_by_tangent(t, y, threshold: float, start: int = 0) -> int | None:
+    """Onset of a rising |y| (T,): first index ≥ ``start`` where |y − y[start]| exceeds
+    ``threshold``, moved back along the tangent at that point to where it meets the
+    starting level (the classic tangent method). ``None`` if never exceeded."""
+    y = np.asarray(y, float)
+    t = np.asarray(t, float)
+    if start >= len(y) - 1:
+        return None
+    dev = np.abs(y[start:] - y[start])
+    hit = np.flatnonzero(dev > threshold)
+    if not hit.size:
+        return None
+    i = start + int(hit[0])
+    lo, hi = max(start, i - 10), min(len(y) - 1, i + 10)
+    slope = (dev[hi - start] - dev[lo - start]) / max(t[hi] - t[lo], 1e-9)
+    if slope <= 0:
+        return i
+    t_on = t[i] - dev[i - start] / slope
+    return int(np.clip(np.searchsorted(t, t_on), start, i))

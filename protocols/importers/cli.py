@@ -1,0 +1,73 @@
+"""``tactile-import``: bring a ROS bag or CSV recording into a run store (Hydra app, ``conf/import.yaml``).
+
+    tactile-import source=lab/rest.bag                       # -> imported/rest/run.zarr
+    tactile-import source=csvs/ rate_hz=100 baseline=estimate out=imported/s3
+    tactile-import source=press.csv calibration=cal.json fingers=[mf]
+
+Exit status: 0 imported, 2 bad input (one line on stderr; nothing written), 1 other failure.
+``verbose=true`` adds the traceback. The work is :func:`protocols.importers.import_source`.
+"""
+
+from __future__ import annotations
+
+import sys
+import traceback
+from pathlib import Path
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import OmegaConf
+
+from .importer import ImportSettings, import_source
+from .recording import ImportInputError
+
+CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
+BAD_INPUT, FAILED = 2, 1
+_exit = {"code": 0}
+
+
+def settings_from(cfg) -> ImportSettings:
+    """:class:`ImportSettings` from the config node (``fingers`` may be a name or a list)."""
+    fingers = cfg.get("fingers")
+    if fingers is not None:
+        fingers = (str(fingers),) if isinstance(fingers, str) else tuple(str(f) for f in fingers)
+    est = cfg.get("estimate") or {}
+    return ImportSettings(rate_hz=cfg.get("rate_hz"), calibration=cfg.get("calibration"),
+                          baseline=str(cfg.get("baseline", "auto")), fingers=fingers or None,
+                          topic=str(cfg.get("topic", "/rh/tactile")),
+                          estimate_early_s=float(est.get("early_s", 1.0)),
+                          estimate_percentile=float(est.get("percentile", 95.0)))
+
+
+def run(cfg, overrides=(), console=print) -> int:
+    """One import; never raises. Returns the exit code."""
+    try:
+        import_source(cfg.source, cfg.out, settings_from(cfg), config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
+                      overrides=overrides, console=console)
+    except (ImportInputError, FileExistsError, ValueError) as exc:
+        _report(cfg, exc, "import error")
+        return BAD_INPUT
+    except Exception as exc:  # noqa: BLE001 - one line, then the exit code says it failed
+        _report(cfg, exc, f"import failed ({type(exc).__name__})")
+        return FAILED
+    return 0
+
+
+def _report(cfg, exc: Exception, what: str) -> None:
+    if cfg.get("verbose"):
+        traceback.print_exception(exc)
+    print(f"{what}: {exc}", file=sys.stderr)
+
+
+@hydra.main(config_path=str(CONF_DIR), config_name="import", version_base=None)
+def _app(cfg) -> None:
+    _exit["code"] = run(cfg, list(HydraConfig.get().overrides.task))
+
+
+def main() -> None:
+    _app()
+    sys.exit(_exit["code"])
+
+
+if __name__ == "__main__":
+    main()

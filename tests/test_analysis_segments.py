@@ -1,0 +1,106 @@
+"""Segmentation on hand-made pressure signals (pure functions, no store)."""
+
+import numpy as np
+import pytest
+
+from analysis import labels as lab
+from analysis import segments as seg
+from analysis.config import AnalysisConfigError, load_config
+
+RATE = 100.0
+
+
+def bump_train(centres_s, width_s, height, T_s=10.0, noise=0.0, seed=0):
+    """PDC-like signal: flat-topped bumps (box convolved with a short Hann ramp) plus noise."""
+    t = np.arange(int(T_s * RATE)) / RATE
+    p = np.zeros_like(t)
+    for c, h in zip(centres_s, np.broadcast_to(height, len(centres_s))):
+        p += h * np.clip((width_s / 2 + 0.2 - np.abs(t - c)) / 0.4, 0, 1)   # trapezoid: FWHM = width_s
+    return t, p + np.random.default_rng(seed).normal(0, noise, len(t))
+
+
+def test_contacts_peaks_and_plateaus_of_three_bumps():
+    t, p = bump_train([2.0, 5.0, 8.0], 1.0, [300, 200, 100], noise=0.3)
+    ps = seg.smooth(p, RATE, 0.05)
+    ivs = seg.contact_intervals(ps, 3.0, RATE, 0.1, 0.05)
+    assert len(ivs) == 3
+    ex = seg.extrema(ps, RATE, prominence=20.0, distance_s=0.5)
+    assert len(ex.peaks) == 3
+    for (a, b), centre in zip(ivs, [2.0, 5.0, 8.0]):
+        (bump,) = seg.bumps(ps, (a, b), ex.peaks, 0.5)
+        assert abs(t[bump.peak] - centre) <= 0.5          # anywhere on the flat top
+        lo, hi, dur = seg.plateau_duration(ps, bump, RATE, 0.5)
+        assert dur == pytest.approx(1.0, abs=0.03)           # FWHM of the trapezoid
+        assert abs((lo + hi) / 2 - centre) < 0.02
+
+
+def test_two_bumps_in_one_contact_are_split_at_the_trough():
+    t, p = bump_train([3.0, 4.3], 0.6, 200, noise=0.2)
+    p += 30 * ((t > 2) & (t < 5.5))                          # never leaves contact between them
+    ps = seg.smooth(p, RATE, 0.05)
+    ivs = seg.contact_intervals(ps, 3.0, RATE)
+    assert len(ivs) == 1
+    ex = seg.extrema(ps, RATE, 20.0, 0.5)
+    bs = seg.bumps(ps, ivs[0], ex.peaks, 0.5)
+    assert len(bs) == 2
+    assert bs[0].stop == bs[1].start
+    assert 3.3 < t[bs[0].stop] < 4.0
+
+
+def test_extrema_distance_and_prominence_are_physical():
+    t, p = bump_train([2.0, 2.3], 0.05, 100)                 # two peaks 0.3 s apart
+    assert len(seg.extrema(p, RATE, 10.0, 0.5).peaks) == 1
+    assert len(seg.extrema(p, RATE, 10.0, 0.1).peaks) == 2
+    assert len(seg.extrema(p, RATE, 500.0, 0.1).peaks) == 0
+
+
+def test_short_noise_is_not_a_contact_and_gaps_merge():
+    p = np.zeros(1000)
+    p[100:104] = 50                                           # 40 ms blip
+    p[300:400] = 50
+    p[403:500] = 50                                           # 30 ms gap
+    ivs = seg.contact_intervals(p, 3.0, RATE, min_s=0.1, merge_gap_s=0.05)
+    assert ivs == [(300, 500)]
+
+
+def test_sweep_labels_cover_each_bump():
+    t, p = bump_train([3.0, 6.0], 1.0, 300)
+    ivs = seg.contact_intervals(p, 3.0, RATE)
+    ex = seg.extrema(p, RATE, 20.0, 0.5)
+    segs = lab.sweep_segments("ff", len(p), ivs, [seg.bumps(p, iv, ex.peaks) for iv in ivs])
+    labels = [s.label for s in segs]
+    assert labels == ["approach", "before", "during", "after", "before", "during", "after", "lift"]
+    for s in segs:
+        assert s.start < s.stop
+
+
+def test_onset_by_tangent_on_a_ramp():
+    t = np.arange(1000) / RATE
+    y = np.clip(t - 4.0, 0, None) * 0.1                       # starts rising at 4 s
+    i = seg.onset_by_tangent(t, y, 0.05, start=0)
+    assert abs(t[i] - 4.0) < 0.05
+
+
+def test_pour_phases_from_a_made_up_grasp():
+    t = np.arange(4000) / RATE
+    p = np.where((t > 1) & (t < 35), 4 + 0.05 * (t - 1), 0.0)
+    p = np.where((t > 20) & (t < 35), p.max() - 0.02 * (t - 20) * 0 - 0.05 * (t - 20), p)
+    rot = np.where(t > 12, 0.02 * (t - 12), 0.0)
+    ph = lab.pour_phases(t, p, (101, 3500), 110, rot, 200, 0.03, 0.15, 50)
+    on = {k: (None if v is None else t[v]) for k, v in ph.onsets.items()}
+    assert on["pour"] == pytest.approx(2.0)
+    assert on["rotation"] == pytest.approx(12.0, abs=0.1)
+    assert on["downward"] == pytest.approx(20.0, abs=0.05)
+    assert on["full_slip"] == pytest.approx(35.0, abs=0.05)
+    assert on["initial_slip"] is None and "trough" in ph.reasons["initial_slip"]
+
+
+def test_config_errors_name_the_key():
+    with pytest.raises(AnalysisConfigError, match="analysis.segmentation.prominence"):
+        load_config({"segmentation": {"prominence": 3}})
+    with pytest.raises(AnalysisConfigError, match="analysis.flow.method"):
+        load_config({"flow": {"method": "magic"}})
+    with pytest.raises(AnalysisConfigError, match="analysis.bogus"):
+        load_config({"bogus": 1})
+    cfg = load_config({"tactile": {"sigma": 2.0}, "views": ["bottom"], "flow": {"method": "dis"}})
+    assert cfg.tactile.sigma == 2.0 and cfg.tactile.views == ("bottom",) and cfg.tactile.flow.method == "dis"
