@@ -96,6 +96,7 @@ def main() -> None:
     # Hydra raises composition errors (unknown keys, bad YAML...) instead of printing its own
     # traceback; they are bad input, reported here as one line.
     os.environ["HYDRA_FULL_ERROR"] = "1"
+    logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
     try:
         _app()
     except Exception as exc:

@@ -79,7 +79,7 @@ class RunContext(Geometry):
             raise RunAborted("stopped by the operator")
         if self.lab.arm.is_protective_stopped():
             raise DeviceError("arm: protective stop")
-        self.interlocks.check(self.lab)
+        self.interlocks.check(self.lab, self.recorder)
 
     def tare(self, seconds: float = TARE_S) -> None:
         """Average PDC at rest, the zero of the contact criteria (and of the analysis)."""

@@ -16,6 +16,8 @@ Limits (``safety`` in the run config, :class:`SafetyConfig`):
 - a stale stream: no new BioTac frame for ``stale_periods`` frame periods — no motion
   continues blind. (A device that stops answering raises from the driver instead, which
   fails the run.)
+- recording failed: the run store could not be committed for ``recording_stall_s`` of wall
+  time (full disk...) — no motion continues unrecorded.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ class SafetyConfig:
     contact_time_max: float = 180.0    # s
     contact_threshold: float = 30.0    # counts of PDC above the tare
     stale_periods: int = 10            # BioTac frame periods
+    recording_stall_s: float = 2.0     # s of wall time without a successful commit
 
 
 class InterlockTripped(Exception):
@@ -61,11 +64,14 @@ class Interlocks:
         self._last_new_frame = clock.now()
         self._last_pose = None
 
-    def check(self, lab) -> None:
+    def check(self, lab, recorder) -> None:
         """Raise :class:`InterlockTripped` if any limit is breached now."""
         now = self.clock.now()
         self._check_biotac(lab.biotac.latest(), now)
         self._check_arm(lab.arm, now)
+        failure = recorder.write_failure(self.cfg.recording_stall_s)
+        if failure:
+            raise InterlockTripped("recording_failed", {"error": failure})
 
     def _check_biotac(self, frame, now: float) -> None:
         if frame is None or frame.seq == self._last_seq:

@@ -10,7 +10,7 @@ from importlib import import_module
 
 from hardware.errors import ConfigError
 
-BACKENDS = {"sim": "hardware.sim:make_sim_lab"}
+BACKENDS = {"sim": "hardware.sim:make_sim_lab", "lab": "hardware.lab:make_real_lab"}
 
 
 def make_lab(cfg):

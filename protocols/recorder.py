@@ -197,6 +197,7 @@ class Recorder:
         if self.t0 is not None:
             raise RuntimeError("recorder already started")
         self.t0 = float(self.clock.now())
+        self._start_wall = time.monotonic()
         self.store.set_attrs(t0_clock_s=self.t0, recording_start_time=utc_now(),
                              streams_recorded=sorted(self.sources))
         for name, source in self.sources.items():
@@ -277,6 +278,16 @@ class Recorder:
         st = self._stats[stream]
         ref = st.last_host_time if st.last_host_time is not None else self._require_started()
         return max(0.0, float(self.clock.now()) - ref)
+
+    def write_failure(self, max_age_s: float = 2.0) -> str | None:
+        """Why the store has not been committed for ``max_age_s`` of wall time (a full disk,
+        a vanished directory...), or ``None`` while recording is healthy."""
+        if self.writer_error is None or self.t0 is None:
+            return None
+        last = self.commit_wall_times[-1] if self.commit_wall_times else self._start_wall
+        if time.monotonic() - last < max_age_s:
+            return None
+        return f"{type(self.writer_error).__name__}: {self.writer_error}"
 
     def stale_streams(self, max_age_s: float | None = None) -> set[str]:
         """Streams whose source is failing, or (with ``max_age_s``) whose newest sample is older."""

@@ -26,6 +26,10 @@ from .store import RunStore, utc_now
 ANALYSIS_ENTRY_POINTS = "tactile_flow.analysis"
 
 
+class RecordingError(RuntimeError):
+    """The run store could not be written to the end (e.g. a full disk)."""
+
+
 @dataclass
 class RunResult:
     """What a run left behind. ``status``: success | aborted | failed | planned."""
@@ -69,7 +73,14 @@ def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
             outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=_bars(cfg.progress), log=console).run()
         finally:
             truth = lab.truth.to_dict() if getattr(lab, "truth", None) is not None else None
-            stats = recorder.stop(outcome.status, truth=truth, attrs={"error": outcome.error})
+            try:
+                stats = recorder.stop(outcome.status, truth=truth, attrs={"error": outcome.error})
+            except Exception as exc:
+                cause = recorder.writer_error or exc
+                console(f"run {run_dir}: {outcome.status} ({outcome.error})")
+                raise RecordingError(f"the run store could not be closed ({type(cause).__name__}: {cause}); it "
+                                     f"keeps every sample committed before that; once the disk has room, run "
+                                     f"`tactile-recover {store_path}`") from exc
             provenance.write_run_json(run_dir / "run.json", prov, status=outcome.status, end_time=utc_now(),
                                       extra={"error": outcome.error, "store": store_path.name})
     return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)

@@ -1,0 +1,93 @@
+"""Faults a lab run meets, injected for real: SIGTERM, an exception inside a step, a full disk.
+Each asserts the exit status, the recorded reason and that the data up to the fault are intact."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+from hydra import compose, initialize_config_dir
+
+from hardware.sim import make_sim_lab
+from protocols.engine import FAILED, RunEngine
+from protocols.plan import make_plan
+from protocols.recorder import Recorder
+from protocols.schema import register
+from protocols.steps import Wait
+from protocols.store import RunStore
+
+register()
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+CLI = [sys.executable, "-c", "from protocols.cli import main; main()", "analyze=false", "progress=false"]
+
+
+def test_sigterm_stops_safely_like_ctrl_c(tmp_path):
+    proc = subprocess.Popen([*CLI, "hardware.realtime=true"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while not list(tmp_path.rglob("run.zarr")) and time.time() < deadline:
+        time.sleep(0.1)
+    time.sleep(7.0)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 3, err
+    (store,) = list(tmp_path.rglob("run.zarr"))
+    tree = xr.open_datatree(store, engine="zarr")
+    assert tree.attrs["status"] == "aborted"
+    assert {"abort", "retract"} <= set(tree["events"]["kind"].values)
+    assert np.all(np.diff(tree["biotac"]["seq"].values) == 1)
+
+
+def test_an_exception_inside_a_step_fails_the_run_with_the_error_recorded(tmp_path, monkeypatch):
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base=None):
+        cfg = compose("config", overrides=["protocol=pour_grasp"])
+    plan = make_plan(cfg)
+    lab = make_sim_lab(cfg.hardware, cfg.surface)
+
+    def broken(self, ctx):
+        raise RuntimeError("gripper firmware said no")
+    monkeypatch.setattr(Wait, "run", broken)
+    with lab:
+        store = RunStore.create(tmp_path / "run.zarr", protocol=plan.protocol, fingers=lab.biotac.fingers)
+        rec = Recorder(store, {"biotac": lab.biotac.read, "pump": lab.pump.read_states}, lab.clock).start()
+        outcome = RunEngine(lab, rec, cfg, plan, log=lambda *a: None).run()
+        delivered = lab.biotac.seq
+        pump_running = lab.pump.status().running
+        rec.stop(outcome.status, attrs={"error": outcome.error})
+    assert outcome.status == FAILED and "gripper firmware said no" in outcome.error
+    assert not pump_running
+    tree = xr.open_datatree(tmp_path / "run.zarr", engine="zarr")
+    assert tree.attrs["status"] == "failed" and "gripper firmware" in tree.attrs["error"]
+    errors = [json.loads(d) for k, d in zip(tree["events"]["kind"].values, tree["events"]["detail"].values)
+              if k == "error"]
+    assert errors and "gripper firmware" in errors[0]["error"]
+    assert tree["biotac"].sizes["time"] == delivered            # every frame delivered is stored
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    mount = tmp_path / "disk"
+    mount.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(mount)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("needs root to mount a small tmpfs")
+    yield mount
+    subprocess.run(["umount", "-l", str(mount)], capture_output=True)
+
+
+def test_a_full_disk_stops_the_run_and_keeps_what_was_committed(tmp_path, small_disk):
+    proc = subprocess.run([*CLI, "protocol=pour_grasp", f"hydra.run.dir={small_disk}/run"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0
+    assert "No space left on device" in proc.stderr and "interlock recording_failed" in proc.stdout
+    store = small_disk / "run" / "run.zarr"
+    tree = xr.open_datatree(store, engine="zarr")             # what was committed opens
+    seq = tree["biotac"]["seq"].values
+    assert len(seq) > 100 and np.all(np.diff(seq) == 1) and seq[0] == 1
+    os.statvfs(small_disk)                                     # the mount is still usable for cleanup
