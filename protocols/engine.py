@@ -96,18 +96,24 @@ class RunContext(Geometry):
         self.event("tare", "tare", {"start": t0 - self.recorder.t0, "end": self.clock.now() - self.recorder.t0,
                                     "pdc": dict(zip(self.fingers, np.round(self.tare_pdc, 1).tolist()))})
 
+    def pdc_rise(self) -> np.ndarray | None:
+        """(F,) PDC above the tare, counts, from the newest valid frame; ``None`` without one."""
+        frame = self.lab.biotac.latest()
+        if frame is None or not frame.is_valid():
+            return None
+        return frame.pdc.astype(float) - self.tare_pdc
+
     def criterion_met(self, crit: Criterion | None, touched: set | None = None) -> bool:
+        """Whether ``crit`` holds now; ``contact_lost`` needs the fingers that were ``touched``."""
         if crit is None:
             return False
-        frame = self.lab.biotac.latest()
-        rise = None if frame is None or not frame.is_valid() else frame.pdc.astype(float) - self.tare_pdc
-        if crit.pdc_rise is not None and rise is not None and rise[self.finger_index] > crit.pdc_rise:
-            return True
-        if crit.contact_lost is not None and rise is not None and touched:
-            return all(rise[i] < crit.contact_lost for i in touched)
-        if crit.force is not None:
-            return float(np.linalg.norm(self.lab.arm.tcp_wrench()[:3])) > crit.force
-        return False
+        rise = self.pdc_rise()
+        if rise is not None:
+            if crit.pdc_rise is not None and rise[self.finger_index] > crit.pdc_rise:
+                return True
+            if crit.contact_lost is not None and touched and all(rise[i] < crit.contact_lost for i in touched):
+                return True
+        return crit.force is not None and float(np.linalg.norm(self.lab.arm.tcp_wrench()[:3])) > crit.force
 
     def move(self, target, speed_mm_s: float, until: Criterion | None = None) -> bool:
         """Straight move to ``target``; with ``until``, stop as soon as it holds. Returns
@@ -128,16 +134,13 @@ class RunContext(Geometry):
     def wait(self, seconds: float, until: Criterion | None = None) -> bool:
         """Keep still for ``seconds``, or until ``until`` holds (returns True then)."""
         end = self.clock.now() + seconds
-        touched = None
-        if until is not None and until.contact_lost is not None:
-            frame = self.lab.biotac.latest()
-            rise = frame.pdc.astype(float) - self.tare_pdc if frame is not None else np.zeros(len(self.fingers))
-            touched = {i for i, r in enumerate(rise) if r > until.contact_lost}
+        touched: set[int] = set()
         while self.clock.now() < end - 1e-9:
             self._tick()
-            if touched is not None:
-                frame = self.lab.biotac.latest()
-                touched |= {i for i, r in enumerate(frame.pdc.astype(float) - self.tare_pdc) if r > until.contact_lost}
+            if until is not None and until.contact_lost is not None:
+                rise = self.pdc_rise()
+                if rise is not None:
+                    touched |= set(np.flatnonzero(rise > until.contact_lost).tolist())
             if self.criterion_met(until, touched):
                 return True
         return False
