@@ -45,7 +45,7 @@ class Estimates:
 
 @dataclass(frozen=True)
 class Pour:
-    rotation_rad: float = 0.03
+    rotation_rad: float = 0.01
     trough_prominence: float = 0.15
 
 

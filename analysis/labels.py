@@ -107,19 +107,26 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
         rotation: (T,) static-flow rotation (rad, curl/2; NaN outside the flow window).
         pour_event: frame of the protocol's ``pour`` step, if recorded (refines the start).
         rotation_rad: rotation that marks the rotation phase (onset by the tangent method).
-        trough_prominence: fraction of the contact's pressure range a trough must reach.
-        distance: minimum distance between troughs, frames.
+        trough_prominence: fraction of the pressure's range (pour start to full slip) the
+            initial-slip fall must reach.
+        distance: frames over which that fall is measured.
         level: the full slip starts when the pressure falls for good below this fraction of
-            its median over the contact.
+            the way from its level after the contact to its median over the contact.
         fast: (T,) a less smoothed pressure for the full-slip edge (default ``pressure``).
 
     - pour: the pour step if recorded inside the contact, else the contact reference;
-    - initial_slip: the first trough of the mean-shifted pressure after the pour start
-      (the bottle first gives);
-    - rotation: static-flow rotation beyond ``rotation_rad``, moved back along its tangent;
-    - downward: the maximum of the pressure after the rotation (or pour) onset: the tangential
-      load stops growing because the grasp has begun to slide;
-    - full_slip: the last fall of the pressure below ``level`` × its contact median.
+    - initial_slip: the first sudden fall of ``fast`` after the pour start, deeper than
+      ``trough_prominence`` × the pressure's range there and well above its noise
+      (:func:`segments.first_drop`): the trough as the bottle first gives;
+    - rotation: static-flow rotation beyond ``rotation_rad``, moved back along its tangent,
+      but not before the rise itself starts (:func:`segments.rise_start`: a torsional breakaway
+      turns the pattern quickly, then slowly);
+    - downward: the deepest sudden fall of ``fast`` after the rotation (or slip, or pour) onset:
+      the contact breaks away and the pad keeps only the kinetic friction (the skin stretch,
+      the tangential load, falls); without one (a creeping slide) the maximum of ``pressure``
+      there: the tangential load stops growing;
+    - full_slip: the last fall of ``fast`` below ``level`` of the way from the level after the
+      contact up to its contact median.
     """
     a, b = contact
     p = np.asarray(pressure, float)
@@ -128,21 +135,19 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
     if pour_event is not None and a <= pour_event < b:
         start = max(start, pour_event)
     onsets["pour"] = start
-    med = float(np.median(p[a:b]))
     q = p if fast is None else np.asarray(fast, float)
-    below = np.flatnonzero(q[start:b] >= level * med)
+    med = float(np.median(q[a:b]))
+    # the level after the contact (the pad unloaded, up to drift), 0 if the record ends in it
+    post = float(np.median(q[b:b + max(distance, 5)])) if b < len(q) else 0.0
+    below = np.flatnonzero(q[start:b] >= post + level * (med - post))
     full = start + int(below[-1]) + 1 if below.size else b
     full = min(full, b)
-    # troughs of the mean-shifted pressure between pour start and the full slip
-    inner = p[start:full]
-    rng = float(np.ptp(inner)) if inner.size else 0.0
-    slip = None
-    if inner.size > 3 and rng > 0:
-        ex = seg.extrema(inner, 1.0, trough_prominence * rng, float(distance))
-        if ex.troughs.size:
-            slip = start + int(ex.troughs[0])
+    # the bottle first gives: the first sudden fall of the (lightly smoothed) pressure between
+    # the pour start and the full slip (stored strain released, load taken off the pad)
+    slip = seg.first_drop(q[:full], start, trough_prominence, distance)
     if slip is None:
-        reasons["initial_slip"] = "no pressure trough (the bottle giving) between the pour start and the full slip"
+        reasons["initial_slip"] = ("no pressure trough (a sudden fall: the bottle giving) between the pour start "
+                                   "and the full slip")
     onsets["initial_slip"] = slip
     rot = np.asarray(rotation, float)
     valid = np.isfinite(rot)
@@ -150,17 +155,29 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
     if valid[start:full].sum() > 3:
         r = np.where(valid, rot, 0.0)
         r_on = seg.onset_by_tangent(t[:full], r[:full], rotation_rad, start=start)
+        r_rise = seg.rise_start(r[:full], rotation_rad, start=start)
+        if r_on is not None and r_rise is not None:
+            r_on = max(r_on, r_rise)      # the tangent dates a sharp, then levelling rise too early
     if r_on is None:
         reasons["rotation"] = f"static-flow rotation never exceeds {rotation_rad:g} rad"
     onsets["rotation"] = r_on
+    # the contact breaks away: the pad keeps only the kinetic friction, the skin's stretch
+    # falls: the deepest sudden fall after the slip / rotation onsets and before the full slip
     after = max(x for x in (start, slip, r_on) if x is not None)
-    down = None
-    if full - after > 3:
+    edge = min(full, len(q) - 1)            # where the final fall (the full slip's edge) begins
+    while edge > after + 1 and q[edge - 1] > q[edge]:
+        edge -= 1
+    edge = max(after, edge - 3)
+    down = seg.first_drop(q[:edge], after, trough_prominence, distance, largest=True) if edge - after > 3 else None
+    if down is not None and down >= edge - 2:
+        down = None
+    if down is None and full - after > 3:
+        # no breakaway drop (a creeping slide): the tangential load stops growing instead
         down = after + int(np.argmax(p[after:full]))
         if down >= full - 2:
             down = None
     if down is None:
-        reasons["downward"] = "no pressure maximum before the full slip"
+        reasons["downward"] = "no sudden pressure fall (the grasp breaking away) nor pressure maximum before the full slip"
     onsets["downward"] = down
     onsets["full_slip"] = full if b < len(p) else None
     if onsets["full_slip"] is None:

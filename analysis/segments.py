@@ -178,3 +178,61 @@ def onset_by_tangent(t, y, threshold: float, start: int = 0) -> int | None:
         return i
     t_on = t[i] - dev[i - start] / slope
     return int(np.clip(np.searchsorted(t, t_on), start, i))
+
+
+def first_drop(signal, start: int, fraction: float, window: int, noise_k: float = 8.0,
+               largest: bool = False) -> int | None:
+    """Onset of the first sudden fall of ``signal`` (T,) at or after ``start``: the frame of its
+    steepest descent within the first window of ``window`` frames over which it falls by more
+    than max(``fraction`` × its range after ``start``, ``noise_k`` × its noise). The noise is
+    the robust std (MAD) of the signal about its running median over ``window`` frames, so
+    slow trends do not count and coloured (smoothed) noise is not underestimated. ``None`` if
+    it never falls so fast. ``largest``: the deepest such fall instead of the first.
+    """
+    x = np.asarray(signal, float)[start:]
+    n = len(x)
+    window = max(2, int(window))
+    if n < window + 3:
+        return None
+    from scipy.ndimage import median_filter
+    r = x - median_filter(x, size=window | 1, mode="nearest")
+    noise = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    thr = max(fraction * float(np.ptp(x)), noise_k * noise)
+    if thr <= 0:
+        return None
+    # fall(i) = x[i] − min(x[i+1 .. i+window])
+    from numpy.lib.stride_tricks import sliding_window_view
+    ahead = sliding_window_view(np.r_[x[1:], np.full(window, np.inf)], window).min(axis=1)[:n]
+    fall = x - ahead
+    hit = np.flatnonzero(fall > thr)
+    if not hit.size:
+        return None
+    i = int(hit[np.argmax(fall[hit])]) if largest else int(hit[0])
+    if largest:
+        i = max(0, i - window)
+    j = min(n - 1, i + 2 * window if largest else i + window)
+    steep = i + int(np.argmin(np.diff(x[i:j + 1])))
+    return start + steep + 1
+
+
+def rise_start(y, threshold: float, start: int = 0, frac: float = 0.1) -> int | None:
+    """Start of the rise of |y − y[start]| past ``threshold``: from the first crossing, walk back
+    while the signal still moves (towards the crossing) faster than ``frac`` × its steepest
+    slope since ``start``. Unlike the tangent, a sharp rise that then levels off is dated to
+    where it begins. ``None`` if never exceeded."""
+    y = np.asarray(y, float)
+    if start >= len(y) - 1:
+        return None
+    hit = np.flatnonzero(np.abs(y[start:] - y[start]) > threshold)
+    if not hit.size:
+        return None
+    i = start + int(hit[0])
+    if i <= start:
+        return i
+    sgn = 1.0 if y[i] >= y[start] else -1.0
+    d = sgn * np.diff(y[start:i + 1])              # d[k]: y[start+k+1] − y[start+k]
+    steep = float(d.max())
+    k = len(d)
+    while k > 0 and d[k - 1] > frac * steep:
+        k -= 1
+    return start + k

@@ -90,6 +90,11 @@ class Arm(Device):
         """(6,) current TCP wrench ``[Fx,Fy,Fz,Tx,Ty,Tz]`` (N, N·m)."""
 
     @abstractmethod
+    def tcp_speed(self) -> np.ndarray:
+        """(6,) current TCP velocity ``[vx, vy, vz, wx, wy, wz]`` (m/s, rad/s), as the
+        controller reports it (``getActualTCPSpeed``)."""
+
+    @abstractmethod
     def controller_time(self) -> float:
         """The controller's timestamp (s)."""
 

@@ -30,6 +30,8 @@ from .steps import Criterion
 
 SUCCESS, ABORTED, FAILED = "success", "aborted", "failed"
 RETRACT_MM = 20.0
+RETRACT_SPEED = 0.02        # m/s
+SETTLE_S = 5.0              # s, the most a stop may take before we call it a fault
 TARE_S = 0.5
 
 
@@ -213,20 +215,26 @@ class RunEngine:
             if not retract:
                 return
             self.ctx.stop_requested = False          # the retract itself must be allowed to run
-            while arm.is_moving():
-                self.ctx.clock.sleep(self.ctx.poll)
+            self._wait_still(SETTLE_S)
             target = self.ctx.pose
             target[2] += RETRACT_MM * 1e-3
             if self.ctx.limits.workspace_max[2] >= target[2]:
-                arm.move_linear(target, 0.02, self.ctx.limits.max_accel / 2, asynchronous=True)
-                while arm.is_moving():
-                    self.ctx.clock.sleep(self.ctx.poll)
+                arm.move_linear(target, RETRACT_SPEED, self.ctx.limits.max_accel / 2, asynchronous=True)
+                self._wait_still(SETTLE_S + RETRACT_MM * 1e-3 / RETRACT_SPEED)
                 self.ctx.event("retract", "retract", {"mm": RETRACT_MM})
         except KeyboardInterrupt:             # second Ctrl-C during the retract: stop where we are
             arm.stop(self.ctx.limits.max_accel)
             self.log("retract interrupted: stopped at once")
         except Exception as exc:  # never mask the reason we are stopping
             self.log(f"warning: could not retract safely: {exc}")
+
+    def _wait_still(self, timeout_s: float) -> None:
+        """Wait (clock time) until the arm is at rest; a bounded wait, never a hang."""
+        end = self.ctx.clock.now() + timeout_s
+        while self.lab.arm.is_moving():
+            if self.ctx.clock.now() > end:
+                raise DeviceError(f"arm: still moving {timeout_s:.1f} s after the stop command")
+            self.ctx.clock.sleep(self.ctx.poll)
 
     def _stop_pump(self) -> None:
         try:

@@ -9,8 +9,8 @@ Limits (``safety`` in the run config, :class:`SafetyConfig`):
 
 - BioTac saturation: PDC above ``pdc_max`` counts, or any electrode below
   ``electrode_min`` counts (electrode counts fall under pressure and bottom out);
-- TCP force above ``force_max`` N, TCP speed above ``speed_max`` m/s (measured from
-  successive poses), the TCP outside the workspace envelope;
+- TCP force above ``force_max`` N, TCP speed above ``speed_max`` m/s (as the controller
+  reports it), the TCP outside the workspace envelope;
 - contact held longer than ``contact_time_max`` s (PDC more than ``contact_threshold``
   counts above its tare on any finger);
 - a stale stream: no new BioTac frame for ``stale_periods`` frame periods — no motion
@@ -37,7 +37,7 @@ class SafetyConfig:
     speed_max: float | None = None     # m/s
     contact_time_max: float = 180.0    # s
     contact_threshold: float = 30.0    # counts of PDC above the tare
-    stale_periods: int = 10            # BioTac frame periods
+    stale_periods: int = 30            # BioTac frame periods (host stalls of ~0.2 s seen under load)
     recording_stall_s: float = 2.0     # s of wall time without a successful commit
 
 
@@ -51,7 +51,7 @@ class InterlockTripped(Exception):
 
 class Interlocks:
     """Checks one lab against :class:`SafetyConfig` limits, keeping what it needs between
-    checks (contact start times, the previous pose)."""
+    checks (contact start times, the newest frame seen)."""
 
     def __init__(self, cfg: SafetyConfig, limits, fingers: list[str], rate_hz: float, clock):
         self.cfg, self.limits, self.fingers, self.clock = cfg, limits, fingers, clock
@@ -62,13 +62,12 @@ class Interlocks:
         self._contact_since = np.full(len(fingers), np.nan)
         self._last_seq = None
         self._last_new_frame = clock.now()
-        self._last_pose = None
 
     def check(self, lab, recorder) -> None:
         """Raise :class:`InterlockTripped` if any limit is breached now."""
         now = self.clock.now()
         self._check_biotac(lab.biotac.latest(), now)
-        self._check_arm(lab.arm, now)
+        self._check_arm(lab.arm)
         failure = recorder.write_failure(self.cfg.recording_stall_s)
         if failure:
             raise InterlockTripped("recording_failed", {"error": failure})
@@ -101,7 +100,7 @@ class Interlocks:
             raise InterlockTripped("contact_time", {"finger": self.fingers[i], "held_s": round(float(held[i]), 2),
                                                     "limit_s": self.cfg.contact_time_max})
 
-    def _check_arm(self, arm, now: float) -> None:
+    def _check_arm(self, arm) -> None:
         pose = np.asarray(arm.tcp_pose(), float)
         force = float(np.linalg.norm(np.asarray(arm.tcp_wrench(), float)[:3]))
         if force > self.force_max:
@@ -109,8 +108,6 @@ class Interlocks:
         lo, hi = self.limits.workspace_min, self.limits.workspace_max
         if np.any(pose[:3] < lo) or np.any(pose[:3] > hi):
             raise InterlockTripped("workspace", {"position_m": np.round(pose[:3], 4).tolist()})
-        if self._last_pose is not None and now > self._last_pose[0]:
-            speed = float(np.linalg.norm(pose[:3] - self._last_pose[1][:3]) / (now - self._last_pose[0]))
-            if speed > self.speed_max * 1.05:        # 5 %: pose quantisation between two reads
-                raise InterlockTripped("tcp_speed", {"speed_m_s": round(speed, 4), "limit_m_s": self.speed_max})
-        self._last_pose = (now, pose)
+        speed = float(np.linalg.norm(np.asarray(arm.tcp_speed(), float)[:3]))
+        if speed > self.speed_max * 1.05:            # 5 %: the controller's own overshoot
+            raise InterlockTripped("tcp_speed", {"speed_m_s": round(speed, 4), "limit_m_s": self.speed_max})

@@ -44,6 +44,7 @@ def _run(*overrides):
 
 @pytest.mark.parametrize("overrides, name", [
     (["safety.force_max=2.0"], "tcp_force"),
+    (["safety.speed_max=0.02"], "tcp_speed"),
     (["safety.pdc_max=2900"], "pdc_saturation"),
     (["safety.electrode_min=1500"], "electrode_saturation"),
     (["hardware.faults.biotac_dropout=[[6.0,7.0]]"], "stale_biotac"),

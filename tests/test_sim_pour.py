@@ -80,3 +80,32 @@ def test_tighter_grip_holds_more_weight():
     loose, _ = _slip_onset(150.0, 1.3)
     tight, _ = _slip_onset(150.0, 1.4)
     assert tight > loose
+
+
+def test_slip_onset_leaves_a_tactile_trace_on_every_grasp_finger(pour):
+    """When the bottle first gives, the skin's recoil takes load off the pads (a PDC trough)
+    and the sudden release rings the PAC; the thumb, opposing the fingers, feels it too."""
+    lab, frames = pour
+    b = biotac_arrays(frames["biotac"])
+    t = b["time"]
+    i = int(np.searchsorted(t, lab.truth.pour["slip_onset"]))
+    for f in ("ff", "mf", "th"):
+        k = lab.biotac.fingers.index(f)
+        pdc = b["pdc"][:, k].astype(float)
+        before, dip = pdc[i - 20:i - 2].mean(), pdc[i - 1:i + 3].min()
+        assert before - dip > 4 * pdc[i - 100:i - 10].std(), f
+        pac = b["pac"][:, k].astype(float).reshape(len(t), -1)
+        quiet = pac[i - 100:i - 10]
+        assert np.abs(pac[i - 1:i + 3] - quiet.mean()).max() > 6 * quiet.std(), f
+
+
+def test_bottle_rotation_turns_the_shear_pattern():
+    """The skin under the pads turns with the bottle: the pressure pattern rotates (the thumb,
+    facing the fingers, sees it mirrored)."""
+    from hardware.sim.config import load_config
+    from hardware.sim.world import SimWorld
+    w = SimWorld(load_config({"seed": 0}), None)
+    w.grasp.stretch_mm, w.grasp.shear_n = 0.8, 2.0
+    _, _, a0 = w._grasp_patch(0.8, 0.0)
+    _, _, a1 = w._grasp_patch(0.8, 0.4)
+    assert np.degrees(np.arccos(a0 @ a1)) == pytest.approx(np.degrees(0.4), abs=0.1)

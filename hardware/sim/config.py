@@ -101,12 +101,16 @@ class PourConfig:
     partial_slip_ratio: float = 0.6       # weight / (μs·N) at which the contact edge starts to slip
     com_offset_m: float = 0.03            # grasp to centre of mass: gravity's lever arm
     torsion_arm_m: float = 0.024          # torque the grip resists per N of friction
-    rotation_damping_n_m_s: float = 0.05
+    rotation_damping_n_m_s: float = 0.01
     max_rotation_rad: float = 0.5
     slide_damping_n_s_m: float = 150.0    # viscous creep of the downward slide
     full_slip_mm: float = 12.0            # slide distance at which the bottle leaves the fingers
     stretch_mm_per_n: float = 0.4         # skin stretch under shear (static flow)
     max_stretch_mm: float = 2.0
+    kinetic_ratio: float = 0.85           # kinetic / static friction (torsional and linear breakaway)
+    slip_release: float = 0.4             # fraction of the stored skin stretch released when the bottle first gives
+    slip_normal_dip: float = 0.12         # fraction of the grip's normal load lost in the skin's recoil
+    recoil_tau_s: float = 0.3             # the released strain and load recover with this time constant
     gravity_sensor: list[float] = field(default_factory=lambda: [0.0, 1.0, 0.0])
 
 
@@ -275,9 +279,14 @@ def validate(cfg: SimConfig, key: str = "hardware") -> SimConfig:
     p = cfg.pour
     check_fingers(p.grasp_fingers, f"{key}.pour.grasp_fingers")
     _positive(p, f"{key}.pour", ["grip_n_per_rad", "friction_static", "partial_slip_ratio", "torsion_arm_m",
-                                 "rotation_damping_n_m_s", "slide_damping_n_s_m", "full_slip_mm", "max_rotation_rad"])
+                                 "rotation_damping_n_m_s", "slide_damping_n_s_m", "full_slip_mm", "max_rotation_rad",
+                                 "kinetic_ratio", "recoil_tau_s"])
     _nonneg(p, f"{key}.pour", ["bottle_empty_g", "com_offset_m", "stretch_mm_per_n", "max_stretch_mm",
-                               "contact_flexion_rad"])
+                               "contact_flexion_rad", "slip_release", "slip_normal_dip"])
+    for name in ("kinetic_ratio", "slip_release", "slip_normal_dip"):
+        if getattr(p, name) > 1 or (name != "kinetic_ratio" and getattr(p, name) >= 1):
+            raise ConfigError(f"{key}.pour.{name}", f"expected a fraction (kinetic_ratio in (0, 1], the others "
+                                                    f"in [0, 1)), got {getattr(p, name)}")
     if len(p.gravity_sensor) != 3 or math.hypot(*p.gravity_sensor) == 0:
         raise ConfigError(f"{key}.pour.gravity_sensor", "expected a non-zero 3-vector in the sensor frame")
     _positive(cfg.pump, f"{key}.pump", ["max_rate_ml_min", "rate_hz"])

@@ -131,6 +131,10 @@ class SimArm(_SimDevice, Arm):
         self._require_connected()
         return self.world.wrench()
 
+    def tcp_speed(self):
+        self._require_connected()
+        return np.asarray(self.world.arm_state(self.world.time)[2], float)
+
     def controller_time(self) -> float:
         self._require_connected()
         return self.device_time(self.world.time)

@@ -35,6 +35,7 @@ class Motion:
             x = x + v * dur + 0.5 * acc * dur * dur
             v = v + acc * dur
             t += dur
+        v[np.abs(v) < 1e-12] = 0.0      # a ramp to rest ends at rest, not at ±1e-18 (rounding)
         self.t_end = t
         self._final = (t, x, v)
         self.rotates = bool(np.any(np.asarray(self.v0)[3:]) or

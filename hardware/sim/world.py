@@ -48,6 +48,7 @@ class FingerContact:
     friction: float = 0.0
     force_world: np.ndarray = None
     point_world: np.ndarray = None
+    shear: float = 0.0        # tangential load of a held object on the pad, N
 
 
 class SimWorld:
@@ -93,6 +94,7 @@ class SimWorld:
         # contacts (latest frame) and the previous forces for dF/dt
         self.contacts = {f: FingerContact(np.zeros(24)) for f in FINGERS}
         self._prev_force = {f: 0.0 for f in FINGERS}
+        self._prev_shear = {f: 0.0 for f in FINGERS}
         self.force_rate = {f: 0.0 for f in FINGERS}
         self.truth = GroundTruth(self.fingers, surface)
         # faults: (time, kind, device)
@@ -266,8 +268,11 @@ class SimWorld:
             if self.grip.get(f, 0.0) > 0 and N > 0:
                 self._add_grasp_contact(c, f, self.grip[f], N)
             self.contacts[f] = c
-            self.force_rate[f] = (c.force - self._prev_force[f]) / dt
+            # PAC sees rapid pressure changes: normal edges and sudden tangential releases
+            d_shear = c.shear - self._prev_shear[f]
+            self.force_rate[f] = (c.force - self._prev_force[f] + min(d_shear, 0.0)) / dt
             self._prev_force[f] = c.force
+            self._prev_shear[f] = c.shear
         self._wrench = self._compute_wrench(p)
         total = sum(self.contacts[f].force for f in self.fingers)
         if total > self.cfg.arm.max_contact_force_n:
@@ -315,8 +320,10 @@ class SimWorld:
         return FingerContact(load, F, friction, f_world, ps + Rs @ (centre * 1e-3))
 
     def _grasp_patch(self, stretch_mm: float, rotation_rad: float):
-        """(24,) taxel loads of a unit-force bottle patch and its centre (sensor, mm), cached:
-        the patch is elongated along gravity, shifted by the skin stretch, turned with the bottle."""
+        """(24,) taxel loads of a unit-force bottle patch, its centre (sensor, mm) and the bottle
+        axis on the pad (3,), cached: the patch is elongated along the bottle's axis (gravity),
+        shifted by the skin stretch and turned with the bottle (the skin under the contact
+        sticks to it)."""
         key = (round(stretch_mm, 3), round(rotation_rad, 4))
         hit = self._patch_cache.get(key)
         if hit is not None:
@@ -330,22 +337,31 @@ class SimWorld:
         off = tip.points[idx] - centre
         a, b = off @ axis, off @ perp
         w = np.exp(-0.5 * (a * a / 6.0 ** 2 + b * b / 2.5 ** 2 + (off[:, 2] / 1.5) ** 2))
-        hit = (tip.kernel[:, idx] @ (w / w.sum()), centre)
+        hit = (tip.kernel[:, idx] @ (w / w.sum()), centre, axis)
         if len(self._patch_cache) > 4096:
             self._patch_cache.clear()
         self._patch_cache[key] = hit
         return hit
 
     def _add_grasp_contact(self, c: FingerContact, finger: str, n_f: float, N: float) -> None:
-        """Add the bottle's pressure patch and its shear (share ``n_f / N``) to ``c``."""
-        sc, gs = self.cfg.sensor, self.grasp
-        unit, centre = self._grasp_patch(gs.stretch_mm, gs.rotation_rad)
-        shear = gs.shear_n * n_f / N
-        load = n_f * unit + shear_loads(self.tip.taxels, centre, self.g_sensor, shear,
-                                        sc.shear_gain, sc.shear_length_mm)
+        """Add the bottle's pressure patch and its shear (share ``n_f / N``) to ``c``.
+
+        The shear the electrodes see is the skin's stretch (released in part when the bottle
+        first gives), pulling along the bottle's axis as the skin under the contact has turned
+        with it; the thumb faces the fingers, so it sees the bottle's turn mirrored. The normal
+        load loses ``normal_scale`` in the skin's recoil. Rapid changes of the tangential load
+        (the release of stored strain) ring the PAC like normal-force edges."""
+        sc, gs, pc = self.cfg.sensor, self.grasp, self.cfg.pour
+        rot = -gs.rotation_rad if finger == "th" else gs.rotation_rad
+        unit, centre, axis = self._grasp_patch(gs.stretch_mm, rot)
+        share = n_f / N
+        shear = gs.skin_shear_n(pc) * share
+        n_on = n_f * gs.normal_scale
+        load = n_on * unit + shear_loads(self.tip.taxels, centre, axis, shear, sc.shear_gain, sc.shear_length_mm)
         slipping = not math.isnan(gs.times["slip_onset"])
         c.load = c.load + load
-        c.force += n_f
+        c.force += n_on
+        c.shear = shear
         # slip drives PAC: stick-slip of the sliding bottle excites it more than a smooth
         # sweep (×3); partial slip at the contact edges a little (×0.2)
-        c.friction += shear * (3.0 if gs.slide_speed_mm_s > 0 else 0.2 if slipping else 0.0)
+        c.friction += gs.shear_n * share * (3.0 if gs.slide_speed_mm_s > 0 else 0.2 if slipping else 0.0)

@@ -1,0 +1,275 @@
+"""A rosbridge v2 server emulating the Shadow Hand's ROS stack, on a websocket (autobahn/asyncio).
+
+Run as a process (``python -m hardware.emulators.rosbridge_server --port 0``); it prints
+``READY url=ws://127.0.0.1:<port>`` once listening. It speaks the JSON operations a
+roslibpy client uses — ``advertise``/``unadvertise``, ``publish``, ``subscribe``/
+``unsubscribe``, ``call_service`` (``/rosapi/topics``, ``/rosapi/get_time``) — and:
+
+- publishes ``/rh/tactile`` (``sr_robot_msgs/BiotacAll``) at 100 Hz: resting counts from
+  the simulator's sensor model (calibrated on a real Shadow Hand recording), ``header.seq``
+  counting up, wall-clock stamps; fingers given with ``--unconnected`` read pdc = -22072
+  and zeros, as Shadow's driver publishes them;
+- publishes ``/joint_states`` (``sensor_msgs/JointState``) at 100 Hz;
+- follows ``/rh_trajectory_controller/command`` (``trajectory_msgs/JointTrajectory``):
+  each named joint moves from where it is to the last point's position, reaching it at
+  that point's ``time_from_start`` (linear in time).
+
+Control lines on stdin: ``pause``/``resume`` publishing (a hung driver), ``stats``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import sys
+import threading
+import time
+
+import numpy as np
+
+from ..biotac import FINGERS
+from ..hand import JOINT_NAMES
+from .cli import EmulatorProcess
+
+UNCONNECTED = {"pac0": 0, "pac1": 0, "pac": [], "pdc": -22072, "tac": 32570, "tdc": 0, "electrodes": [0] * 24}
+TOPIC_TYPES = {"/rh/tactile": "sr_robot_msgs/BiotacAll", "/joint_states": "sensor_msgs/JointState",
+               "/rh_trajectory_controller/command": "trajectory_msgs/JointTrajectory"}
+
+
+def ros_time(t: float) -> dict:
+    secs = int(t)
+    return {"secs": secs, "nsecs": int((t - secs) * 1e9)}
+
+
+class HandModel:
+    """Joint positions following linear-in-time segments toward commanded targets."""
+
+    def __init__(self):
+        n = len(JOINT_NAMES)
+        self.start_q = np.zeros(n)
+        self.goal_q = np.zeros(n)
+        self.t_start = np.zeros(n)
+        self.t_end = np.zeros(n)
+        self.commands = 0
+
+    def positions(self, t: float) -> np.ndarray:
+        span = np.maximum(self.t_end - self.t_start, 1e-9)
+        s = np.clip((t - self.t_start) / span, 0.0, 1.0)
+        return self.start_q + s * (self.goal_q - self.start_q)
+
+    def command(self, msg: dict, t: float) -> None:
+        points = msg.get("points") or []
+        if not points:
+            return
+        last = points[-1]
+        d = last.get("time_from_start", {})
+        duration = float(d.get("secs", d.get("sec", 0))) + 1e-9 * float(d.get("nsecs", d.get("nanosec", 0)))
+        q = self.positions(t)
+        for name, goal in zip(msg.get("joint_names", []), last.get("positions", [])):
+            if name in JOINT_NAMES:
+                i = JOINT_NAMES.index(name)
+                self.start_q[i], self.goal_q[i] = q[i], float(goal)
+                self.t_start[i], self.t_end[i] = t, t + duration
+        self.commands += 1
+
+
+class BiotacSource:
+    """BiotacAll messages with resting counts (the simulator's calibrated sensor model)."""
+
+    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0):
+        from ..sim.config import SensorModelConfig
+        from ..sim.sensor import BiotacModel, SensorInputs
+
+        self.connected = [f for f in FINGERS if f not in unconnected]
+        F = len(self.connected)
+        self.model = BiotacModel(self.connected, SensorModelConfig(), np.random.default_rng(seed), 1.0 / rate_hz)
+        self.inputs = SensorInputs(np.zeros((F, 24)), np.zeros(F), np.zeros(F), np.zeros(F))
+        self.seq = 0
+        self.t0 = time.monotonic()
+
+    def message(self, wall: float) -> dict:
+        e, pdc, tdc, tac, pac = self.model.frame(time.monotonic() - self.t0, self.inputs)
+        self.seq += 1
+        tactiles = []
+        for f in FINGERS:
+            if f not in self.connected:
+                tactiles.append(dict(UNCONNECTED))
+                continue
+            k = self.connected.index(f)
+            p = [int(x) for x in pac[k]]
+            tactiles.append({"pac0": p[0], "pac1": p[1], "pac": p, "pdc": int(pdc[k]), "tac": int(tac[k]),
+                             "tdc": int(tdc[k]), "electrodes": [int(x) for x in e[k]]})
+        return {"header": {"seq": self.seq, "stamp": ros_time(wall), "frame_id": "rh_distal"}, "tactiles": tactiles}
+
+
+class Bridge:
+    """Server state: clients and their subscriptions, the hand, the BioTacs, counters."""
+
+    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0):
+        self.clients: set = set()
+        self.hand = HandModel()
+        self.biotacs = BiotacSource(unconnected, seed, rate_hz)
+        self.rate_hz = rate_hz
+        self.paused = False
+        self.published = {"/rh/tactile": 0, "/joint_states": 0}
+        self.js_seq = 0
+
+    def handle(self, client, msg: dict) -> None:
+        op = msg.get("op")
+        topic = msg.get("topic")
+        if op == "subscribe":
+            client.subscriptions.add(topic)
+        elif op == "unsubscribe":
+            client.subscriptions.discard(topic)
+        elif op == "publish" and topic == "/rh_trajectory_controller/command":
+            self.hand.command(msg.get("msg", {}), time.monotonic())
+        elif op == "call_service":
+            client.send_json(self.service(msg))
+        # advertise / unadvertise / other publishes need no answer from a rosbridge server
+
+    def service(self, msg: dict) -> dict:
+        name = msg.get("service")
+        reply = {"op": "service_response", "service": name, "id": msg.get("id"), "result": True}
+        if name == "/rosapi/topics":
+            reply["values"] = {"topics": list(TOPIC_TYPES), "types": list(TOPIC_TYPES.values())}
+        elif name == "/rosapi/get_time":
+            reply["values"] = {"time": ros_time(time.time())}
+        else:
+            reply.update(result=False, values=f"service {name} does not exist (emulated rosbridge)")
+        return reply
+
+    def tick(self) -> None:
+        if self.paused or not self.clients:
+            return
+        wall = time.time()
+        self._publish("/rh/tactile", self.biotacs.message(wall))
+        self.js_seq += 1
+        q = self.hand.positions(time.monotonic())
+        self._publish("/joint_states", {"header": {"seq": self.js_seq, "stamp": ros_time(wall), "frame_id": ""},
+                                        "name": list(JOINT_NAMES), "position": q.tolist(),
+                                        "velocity": [0.0] * len(q), "effort": [0.0] * len(q)})
+
+    def _publish(self, topic: str, msg: dict) -> None:
+        payload = None
+        for c in list(self.clients):
+            if topic in c.subscriptions:
+                payload = payload or json.dumps({"op": "publish", "topic": topic, "msg": msg}).encode()
+                c.sendMessage(payload, isBinary=False)
+        self.published[topic] += 1
+
+    def control(self, line: str) -> str:
+        cmd = line.strip()
+        if cmd in ("pause", "resume"):
+            self.paused = cmd == "pause"
+            return f"OK {json.dumps({'paused': self.paused})}"
+        if cmd == "stats":
+            return "OK " + json.dumps({"published": self.published, "clients": len(self.clients),
+                                       "hand_commands": self.hand.commands, "biotac_seq": self.biotacs.seq,
+                                       "positions": dict(zip(JOINT_NAMES, self.hand.positions(time.monotonic()).round(4).tolist()))})
+        return f"ERR unknown command {cmd!r}; expected pause, resume, stats"
+
+
+def make_protocol(bridge: Bridge):
+    from autobahn.asyncio.websocket import WebSocketServerProtocol
+
+    class RosbridgeProtocol(WebSocketServerProtocol):
+        def onOpen(self):
+            self.subscriptions = set()
+            bridge.clients.add(self)
+
+        def onMessage(self, payload, isBinary):
+            try:
+                msg = json.loads(payload)
+            except ValueError:
+                return
+            bridge.handle(self, msg)
+
+        def onClose(self, wasClean, code, reason):
+            bridge.clients.discard(self)
+
+        def send_json(self, msg: dict) -> None:
+            self.sendMessage(json.dumps(msg).encode(), isBinary=False)
+
+    return RosbridgeProtocol
+
+
+async def serve(host: str, port: int, bridge: Bridge) -> None:
+    from autobahn.asyncio.websocket import WebSocketServerFactory
+
+    factory = WebSocketServerFactory(f"ws://{host}:{port or 9090}")   # the URL only names the server
+    factory.protocol = make_protocol(bridge)
+    loop = asyncio.get_running_loop()
+    server = await loop.create_server(factory, host, port)
+    actual = server.sockets[0].getsockname()[1]
+    done = asyncio.Event()
+
+    def read_stdin():                       # control channel; EOF (parent gone) stops the server
+        for line in sys.stdin:
+            reply = asyncio.run_coroutine_threadsafe(_control(bridge, line), loop).result()
+            print(reply, flush=True)
+        loop.call_soon_threadsafe(done.set)
+
+    threading.Thread(target=read_stdin, daemon=True).start()
+    print(f"READY url=ws://{host}:{actual}", flush=True)
+    period = 1.0 / bridge.rate_hz
+    t_next = loop.time()
+    while not done.is_set():
+        bridge.tick()
+        t_next = max(t_next + period, loop.time() - period)
+        await asyncio.sleep(max(0.0, t_next - loop.time()))
+    server.close()
+
+
+async def _control(bridge: Bridge, line: str) -> str:
+    return bridge.control(line)
+
+
+class RosbridgeEmulator(EmulatorProcess):
+    """The rosbridge emulator as a child process; ``url`` is where it listens.
+
+        with RosbridgeEmulator() as emu:              # port 0: a free port
+            ShadowHand(ShadowHandConfig(RosbridgeConfig(emu.url)))
+    """
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 0, seed: int = 0, unconnected=(),
+                 rate_hz: float = 100.0):
+        args = ["--host", host, "--port", port, "--seed", seed, "--rate", rate_hz]
+        if unconnected:
+            args += ["--unconnected", ",".join(unconnected)]
+        super().__init__("hardware.emulators.rosbridge_server", args)
+
+    @property
+    def url(self) -> str:
+        return self.ready["url"]
+
+    @property
+    def alive(self) -> bool:
+        return self.proc is not None and self.proc.poll() is None
+
+    def stats(self) -> dict:
+        return json.loads(self.command("stats"))
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description="rosbridge v2 emulator of the Shadow Hand and its BioTacs")
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=9090, help="0: any free port (printed on the READY line)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--rate", type=float, default=100.0, help="BiotacAll and JointState rate (Hz)")
+    p.add_argument("--unconnected", default="", help="fingers without a sensor, e.g. rf,lf")
+    a = p.parse_args(argv)
+    unconnected = [f for f in a.unconnected.split(",") if f]
+    if any(f not in FINGERS for f in unconnected):
+        p.error(f"--unconnected: expected names of {FINGERS}, got {unconnected}")
+    bridge = Bridge(unconnected, a.seed, a.rate)
+    try:
+        asyncio.run(serve(a.host, a.port, bridge))
+    except OSError as exc:
+        print(f"ERROR cannot listen on {a.host}:{a.port}: {exc}", flush=True)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

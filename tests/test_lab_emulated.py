@@ -1,0 +1,121 @@
+"""The whole real lab against its emulators: ``hardware=lab_emulated`` runs the straws
+protocol to success through ur_rtde, roslibpy and pyserial, and leaves a run store with the
+schema of a simulated run. The test starts every emulator itself (separate processes) and
+passes their addresses as overrides."""
+
+from __future__ import annotations
+
+import os
+import random
+import socket
+import time
+from pathlib import Path
+
+import pytest
+import xarray as xr
+from hydra import compose, initialize_config_dir
+
+pytest.importorskip("rtde_control")
+
+from hardware.emulators.rosbridge_server import RosbridgeEmulator  # noqa: E402
+from hardware.emulators.serial_devices import SerialDevicesEmulator  # noqa: E402
+from hardware.emulators.ur_controller import URControllerProcess  # noqa: E402
+from hardware.rosbridge import RosbridgeUnreachableError  # noqa: E402
+from protocols.run import run_protocol  # noqa: E402
+from protocols.schema import register  # noqa: E402
+
+register()
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+HOME = (0.3, 0.0, 0.2, 3.141592653589793, 0.0, 0.0)          # hardware.arm.home_pose of lab.yaml
+FAST = ["protocol.sweep_speed=40", "protocol.travel_speed=100", "protocol.approach_speed=10",
+        "progress=false", "analyze=false"]
+
+
+def free_loopback() -> str:
+    """A 127.0.x.y whose RTDE port is free: the UR ports are fixed, so parallel runs need their own address."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+    for _ in range(50):
+        host = f"127.0.{60 + int(worker[2:] or 0)}.{random.randint(2, 250)}"
+        with socket.socket() as s:
+            try:
+                s.bind((host, 30004))
+                return host
+            except OSError:
+                continue
+    pytest.skip("no free loopback address for the UR controller emulator")
+
+
+@pytest.fixture(scope="module")
+def emulated_lab():
+    """UR controller, rosbridge and serial emulators; yields the Hydra overrides that point
+    ``hardware=lab_emulated`` at them."""
+    host = free_loopback()
+    with URControllerProcess(host, initial_pose=HOME), RosbridgeEmulator() as ros, SerialDevicesEmulator() as ser:
+        yield [f"hardware.arm.host={host}", f"hardware.rosbridge.url={ros.url}",
+               f"hardware.biotac.port={ser.ports['biotac']}", f"hardware.pump.port={ser.ports['pump']}",
+               f"hardware.scale.port={ser.ports['scale']}"]
+
+
+@pytest.fixture(scope="module")
+def sim_schema(tmp_path_factory):
+    """The schema of the same protocol run on the simulated lab (ground truth aside)."""
+    sim = run_protocol(_cfg("hardware=sim", "protocol=straws_sweep", *FAST), tmp_path_factory.mktemp("sim"),
+                       console=lambda *a: None)
+    assert sim.status == "success"
+    return _schema(sim.store)
+
+
+def _cfg(*overrides):
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base=None):
+        return compose("config", overrides=list(overrides))
+
+
+def _schema(store: Path, skip=("truth",)) -> dict:
+    """Groups → variables → (dims, dtype, attribute names), and each group's attribute names."""
+    tree = xr.open_datatree(store, engine="zarr")
+    out = {}
+    for node in tree.subtree:
+        if node.path.strip("/").split("/")[0] in skip:
+            continue
+        out[node.path] = ({k: (v.dims, str(v.dtype), sorted(v.attrs)) for k, v in node.ds.variables.items()},
+                          sorted(node.attrs))
+    return out
+
+
+@pytest.mark.parametrize("biotac_source", ["rosbridge", "serial"])
+def test_straws_protocol_runs_to_success_with_the_schema_of_a_sim_run(emulated_lab, sim_schema, biotac_source,
+                                                                     tmp_path):
+    cfg = _cfg("hardware=lab_emulated", "protocol=straws_sweep", f"hardware.biotac.source={biotac_source}",
+               *emulated_lab, *FAST)
+    t0 = time.monotonic()
+    result = run_protocol(cfg, tmp_path / "lab", console=lambda *a: None)
+    elapsed = time.monotonic() - t0
+    assert result.status == "success", result.error
+    assert elapsed < 3 * result.plan.duration + 10
+
+    assert _schema(result.store) == sim_schema
+
+    tree = xr.open_datatree(result.store, engine="zarr")
+    bt = tree["biotac"].ds
+    span = float(bt.time[-1] - bt.time[0])
+    # rates are measured in the driver tests; here only "streamed throughout", robust to a loaded machine
+    assert 70 < bt.sizes["time"] / span < 115                                # BioTac at ~100 Hz
+    assert bool(bt.valid.all()) and list(bt.finger.values) == ["ff", "mf", "rf", "lf", "th"]
+    assert tree["arm"].ds.sizes["time_arm"] / span > 50                     # RTDE at 125 Hz (CB3)
+    assert tree["hand"].ds.sizes["time_hand"] > 0 and tree["pour"].ds.sizes["time_scale"] > 0
+    kinds = list(tree["events"].ds.kind.values)
+    assert kinds.count("step_start") == kinds.count("step_end") == len(result.plan.steps)
+    assert (tmp_path / "lab" / "run.json").exists()
+
+
+def test_unreachable_rosbridge_fails_fast_and_leaves_nothing_half_written(emulated_lab, tmp_path):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        dead = f"ws://127.0.0.1:{s.getsockname()[1]}"
+    overrides = [o for o in emulated_lab if not o.startswith("hardware.rosbridge.url=")]
+    cfg = _cfg("hardware=lab_emulated", *overrides, f"hardware.rosbridge.url={dead}", *FAST)
+    t0 = time.monotonic()
+    with pytest.raises(RosbridgeUnreachableError, match=rf"unreachable rosbridge at {dead}: .*hint"):
+        run_protocol(cfg, tmp_path / "run", console=lambda *a: None)
+    assert time.monotonic() - t0 < 10
+    assert not (tmp_path / "run" / "run.zarr").exists() and not (tmp_path / "run" / "run.json").exists()
