@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hardware.errors import DeviceError
+from hardware.errors import DeviceError, ProtectiveStopError
 
 from .interlocks import InterlockTripped, Interlocks, SafetyConfig
 from .plan import Geometry, Limits, Plan, PlannedStep
@@ -80,7 +80,7 @@ class RunContext(Geometry):
         if self.stop_requested:
             raise RunAborted("stopped by the operator")
         if self.lab.arm.is_protective_stopped():
-            raise DeviceError("arm: protective stop")
+            raise ProtectiveStopError("arm: protective stop")
         self.interlocks.check(self.lab, self.recorder)
 
     def tare(self, seconds: float = TARE_S) -> None:
@@ -199,7 +199,17 @@ class RunEngine:
         bar = self.progress_factory(planned) if self.progress_factory else None
         self.ctx.progress = bar.update if bar else None
         try:
-            step.run(self.ctx)
+            try:
+                step.run(self.ctx)
+            except ProtectiveStopError as exc:
+                if self.ctx.interlocks.cfg.on_protective_stop != "recover":
+                    raise
+                # Every step goes to absolute targets, so running it again from where the arm
+                # stopped finishes it (a sweep continues to its end point at the same height).
+                self.ctx.event("protective_stop", planned.name, {"error": str(exc), "action": "recover"})
+                self.lab.arm.recover()
+                self.ctx.event("recovered", planned.name, {"pose": self.ctx.pose.round(5).tolist()})
+                step.run(self.ctx)
         finally:
             if bar:
                 bar.close()

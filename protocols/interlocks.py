@@ -39,6 +39,7 @@ class SafetyConfig:
     contact_threshold: float = 30.0    # counts of PDC above the tare
     stale_periods: int = 30            # BioTac frame periods (host stalls of ~0.2 s seen under load)
     recording_stall_s: float = 2.0     # s of wall time without a successful commit
+    on_protective_stop: str = "abort"  # "abort": fail the run; "recover": unlock, redo the step once
 
 
 class InterlockTripped(Exception):
@@ -54,6 +55,8 @@ class Interlocks:
     checks (contact start times, the newest frame seen)."""
 
     def __init__(self, cfg: SafetyConfig, limits, fingers: list[str], rate_hz: float, clock):
+        if cfg.on_protective_stop not in ("abort", "recover"):
+            raise ValueError(f"safety.on_protective_stop: expected 'abort' or 'recover', got {cfg.on_protective_stop!r}")
         self.cfg, self.limits, self.fingers, self.clock = cfg, limits, fingers, clock
         self.force_max = limits.max_force if cfg.force_max is None else cfg.force_max
         self.speed_max = limits.max_speed if cfg.speed_max is None else cfg.speed_max

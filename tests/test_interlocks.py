@@ -66,3 +66,12 @@ def test_pour_interlock_stops_the_pump():
 def test_a_short_dropout_under_the_stale_limit_does_not_stop_the_run():
     outcome, interlocks, _, _, _ = _run("hardware.faults.biotac_dropout=[[6.0,6.05]]")
     assert outcome.status == SUCCESS and not interlocks
+
+
+def test_protective_stop_mid_sweep_aborts_or_recovers_per_config():
+    stop = "hardware.faults.protective_stop_s=9.0"               # in the middle of the sweep
+    outcome, _, kinds, _, _ = _run(stop)
+    assert outcome.status == "failed" and "protective stop" in outcome.error
+    outcome, _, kinds, z, _ = _run(stop, "safety.on_protective_stop=recover")
+    assert outcome.status == SUCCESS and kinds.count("step_end") == 6
+    assert kinds.index("protective_stop") < kinds.index("recovered")
