@@ -176,3 +176,12 @@ def test_resumed_sweep_skips_successes_reruns_the_rest_and_refuses_a_changed_con
 
     proc = tactile_run(tmp_path, *sweep, "resume=true", "protocol.sweep_depth=1.0")
     assert proc.returncode == 2 and "another config" in proc.stderr and "sweep_depth" in proc.stderr
+
+
+def test_runs_started_in_the_same_second_get_distinct_directories(tmp_path):
+    cmd = [sys.executable, "-c", "from protocols.cli import main; main()", "plan_only=true"]
+    procs = [subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+             for _ in range(3)]
+    assert all(p.wait(timeout=120) == 0 for p in procs)
+    dirs = [p for p in (tmp_path / "outputs").glob("*/*") if p.is_dir()]
+    assert len(dirs) == 3 and len({d.name for d in dirs}) == 3
