@@ -226,9 +226,7 @@ class Grasp(Step):
 
     def plan(self, ctx):
         self.targets(ctx)
-        _positive(self.duration, f"{self.key}.duration")
-        ctx.time += self.duration
-        return [], self.duration
+        return _still(ctx, self.duration, f"{self.key}.duration")
 
     def run(self, ctx):
         ctx.lab.hand.move_to(self.targets(ctx), self.duration, wait=False)
@@ -244,9 +242,7 @@ class Release(Step):
     duration: float = 1.0
 
     def plan(self, ctx):
-        _positive(self.duration, f"{self.key}.duration")
-        ctx.time += self.duration
-        return [], self.duration
+        return _still(ctx, self.duration, f"{self.key}.duration")
 
     def run(self, ctx):
         ctx.lab.pump.stop()
@@ -301,11 +297,9 @@ class Hold(Step):
     until: Criterion | None = None
 
     def plan(self, ctx):
-        duration = ctx.params.hold_time if self.duration is None else self.duration
-        _positive(duration, f"{self.key}.duration")
         ctx.check_criterion(self.until, f"{self.key}.until")
-        ctx.time += duration
-        return [], duration
+        return _still(ctx, ctx.params.hold_time if self.duration is None else self.duration,
+                      f"{self.key}.duration")
 
     def run(self, ctx):
         duration = ctx.params.hold_time if self.duration is None else self.duration
@@ -323,9 +317,7 @@ class Wait(Step):
     duration: float = 1.0
 
     def plan(self, ctx):
-        _positive(self.duration, f"{self.key}.duration")
-        ctx.time += self.duration
-        return [], self.duration
+        return _still(ctx, self.duration, f"{self.key}.duration")
 
     def run(self, ctx):
         ctx.wait(self.duration)
@@ -347,6 +339,13 @@ class Repeat(Step):
 
     def run(self, ctx):  # pragma: no cover - the engine runs the expanded steps
         raise AssertionError("repeat is expanded before running")
+
+
+def _still(ctx, seconds, key: str) -> tuple[list, float]:
+    """Plan ``seconds`` without arm motion: no waypoints, the planned clock moves on."""
+    _positive(seconds, key)
+    ctx.time += seconds
+    return [], seconds
 
 
 def _positive(value, key: str) -> None:

@@ -17,3 +17,22 @@ def model(cache_dir):
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)
+
+
+class EventLog:
+    """The part of the recorder the run engine talks to, kept in memory: events, the run's
+    time origin and the recording's health. Engine tests that need no store use it."""
+
+    t0 = 0.0
+
+    def __init__(self):
+        self.events = []
+
+    def event(self, kind, name, detail=None):
+        self.events.append((kind, name, detail))
+
+    def write_failure(self, max_age_s):
+        return None
+
+    def kinds(self):
+        return [k for k, _, _ in self.events]

@@ -9,23 +9,11 @@ from hydra import compose, initialize_config_dir
 from hardware.sim import make_sim_lab
 from protocols.engine import ABORTED, SUCCESS, RunEngine
 from protocols.plan import make_plan
+from conftest import EventLog
 from protocols.schema import register
 
 register()
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
-
-
-class _Events:
-    t0 = 0.0
-
-    def __init__(self):
-        self.events = []
-
-    def event(self, kind, name, detail=None):
-        self.events.append((kind, name, detail))
-
-    def write_failure(self, max_age_s):
-        return None
 
 
 def _run(*overrides):
@@ -33,7 +21,7 @@ def _run(*overrides):
         cfg = compose("config", overrides=list(overrides))
     plan = make_plan(cfg)
     lab = make_sim_lab(cfg.hardware, cfg.surface)
-    events = _Events()
+    events = EventLog()
     with lab:
         outcome = RunEngine(lab, events, cfg, plan, log=lambda *a: None).run()
         z = lab.arm.tcp_pose()[2]

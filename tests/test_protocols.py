@@ -9,6 +9,7 @@ from omegaconf import OmegaConf
 from hardware.sim import make_sim_lab
 from protocols.engine import ABORTED, FAILED, SUCCESS, RunEngine
 from protocols.plan import format_timeline, make_plan
+from conftest import EventLog
 from protocols.schema import register
 from protocols.steps import ProtocolError, parse_steps
 
@@ -20,24 +21,6 @@ CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 def _cfg(*overrides):
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base=None):
         return compose("config", overrides=list(overrides))
-
-
-class _Events:
-    """The recorder's event interface, kept in memory (the engine tests need nothing else)."""
-
-    t0 = 0.0
-
-    def __init__(self):
-        self.events = []
-
-    def event(self, kind, name, detail=None):
-        self.events.append((kind, name, detail))
-
-    def write_failure(self, max_age_s):
-        return None
-
-    def kinds(self):
-        return [k for k, _, _ in self.events]
 
 
 @pytest.mark.parametrize("protocol", ["straws_sweep", "sticks_sweep", "pour_grasp"])
@@ -99,7 +82,7 @@ def test_repeat_expands_into_the_timeline():
 def _run(cfg):
     plan = make_plan(cfg)
     lab = make_sim_lab(cfg.hardware, cfg.surface)
-    events = _Events()
+    events = EventLog()
     with lab:
         outcome = RunEngine(lab, events, cfg, plan, log=lambda *a: None).run()
         truth = lab.truth.to_dict()
@@ -135,7 +118,7 @@ def test_operator_stop_retracts_and_aborts():
     cfg = _cfg()
     plan = make_plan(cfg)
     lab = make_sim_lab(cfg.hardware, cfg.surface)
-    events = _Events()
+    events = EventLog()
     with lab:
         engine = RunEngine(lab, events, cfg, plan, log=lambda *a: None)
         tick = engine.ctx._tick
