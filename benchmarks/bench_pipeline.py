@@ -29,7 +29,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from tactile import aggregate, frames, geometry, signals, surface, synthetic  # noqa: E402
+from tactile import aggregate, frames, geometry, synthetic  # noqa: E402
 from tactile.pipeline import TactileConfig, TactileModel  # noqa: E402
 
 cv2.setNumThreads(1)
@@ -128,7 +128,7 @@ def naive(model, act, n_frames):
     k = np.exp(-d / (2 * cfg.sigma ** 2))
     t_weights = time.perf_counter() - t0
 
-    t_render = t_agg = 0.0
+    t_render = 0.0
     u8 = {}
     for f in range(n_fingers):
         for name, plan in model.plans.items():

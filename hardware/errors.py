@@ -58,3 +58,13 @@ class ConfigError(ValueError):
     def __init__(self, key: str, message: str):
         self.key = key
         super().__init__(f"{key}: {message}")
+
+
+def require_positive(cfg, names, key: str) -> None:
+    """Raise :class:`ConfigError` naming ``<key>.<name>`` unless each attribute ``names`` of
+    the config dataclass ``cfg`` is a finite number > 0."""
+    import math
+    for name in names:
+        value = getattr(cfg, name)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+            raise ConfigError(f"{key}.{name}", f"expected a number > 0, got {value!r}")

@@ -24,7 +24,7 @@ import time
 from dataclasses import dataclass, field
 from urllib.parse import urlparse
 
-from .errors import ConfigError, DeviceTimeoutError
+from .errors import ConfigError, DeviceTimeoutError, require_positive
 
 log = logging.getLogger(__name__)
 
@@ -63,9 +63,7 @@ class RosbridgeConfig:
             parts.port
         except ValueError:
             raise ConfigError(f"{self.key}.url", f"bad port in {self.url!r}") from None
-        for name in ("connect_timeout_s", "stale_timeout_s"):
-            if not float(getattr(self, name)) > 0:
-                raise ConfigError(f"{self.key}.{name}", f"expected a number > 0, got {getattr(self, name)!r}")
+        require_positive(self, ("connect_timeout_s", "stale_timeout_s"), self.key)
         if self.transport not in ("twisted", "asyncio"):
             raise ConfigError(f"{self.key}.transport", f"expected twisted or asyncio, got {self.transport!r}")
 

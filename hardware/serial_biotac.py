@@ -26,7 +26,8 @@ import numpy as np
 from .biotac import FINGERS, N_TAXELS, BiotacFrame, TactileSensors, check_fingers
 from .device import Clock, DeviceIdentity, WallClock
 from .errors import (ConfigError, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
-                     NotConnectedError)
+                     NotConnectedError,
+                     require_positive)
 
 SYNC = b"\xA5\x5A"
 VERSION = 1
@@ -197,9 +198,7 @@ class SerialBiotacConfig:
 
     def __post_init__(self):
         self.fingers = check_fingers(self.fingers, f"{self.key}.fingers")
-        for name in ("rate_hz", "buffer_s", "first_frame_timeout_s", "stale_timeout_s"):
-            if not float(getattr(self, name)) > 0:
-                raise ConfigError(f"{self.key}.{name}", f"expected a number > 0, got {getattr(self, name)!r}")
+        require_positive(self, ("rate_hz", "buffer_s", "first_frame_timeout_s", "stale_timeout_s"), self.key)
         if not isinstance(self.port, str) or not self.port:
             raise ConfigError(f"{self.key}.port", f"expected a pyserial port or URL, got {self.port!r}")
 

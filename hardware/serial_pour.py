@@ -23,8 +23,8 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from .device import Clock, DeviceIdentity, WallClock
-from .errors import (ConfigError, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
-                     NotConnectedError)
+from .errors import (DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError, NotConnectedError,
+                     require_positive)
 from .pour import Pump, PumpState, Scale, ScaleReading
 from .serial_biotac import open_serial
 
@@ -107,10 +107,7 @@ class SerialPumpConfig:
     key: str = field(default="hardware.pump", repr=False)
 
     def __post_init__(self):
-        for name in ("max_rate_ml_min", "poll_hz", "timeout_s", "buffer_s"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ConfigError(f"{self.key}.{name}", f"expected a number > 0, got {value!r}")
+        require_positive(self, ("max_rate_ml_min", "poll_hz", "timeout_s", "buffer_s"), self.key)
 
 
 class SerialPump(Pump):
@@ -289,10 +286,7 @@ class SerialScaleConfig:
     key: str = field(default="hardware.scale", repr=False)
 
     def __post_init__(self):
-        for name in ("rate_hz", "first_reading_timeout_s", "stale_timeout_s", "timeout_s", "buffer_s"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ConfigError(f"{self.key}.{name}", f"expected a number > 0, got {value!r}")
+        require_positive(self, ("rate_hz", "first_reading_timeout_s", "stale_timeout_s", "timeout_s", "buffer_s"), self.key)
 
 
 class SerialScale(Scale):

@@ -27,7 +27,8 @@ import numpy as np
 from .biotac import FINGERS, N_TAXELS, BiotacFrame, TactileSensors, check_fingers
 from .device import Clock, DeviceIdentity, WallClock
 from .errors import (ConfigError, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
-                     NotConnectedError, SafetyError)
+                     NotConnectedError, SafetyError,
+                     require_positive)
 from .hand import JOINT_INDEX, JOINT_NAMES, Hand, HandState, check_joint_names
 from .rosbridge import RosbridgeConfig, RosbridgeConnection
 
@@ -142,10 +143,8 @@ class ShadowHandConfig:
             check_joint_names(self.controller_joints, f"{self.key}.controller_joints")
         except ValueError as exc:
             raise ConfigError(f"{self.key}.controller_joints", str(exc)) from None
-        for name in ("max_velocity_rad_s", "first_state_timeout_s", "arrival_tolerance_rad",
-                     "arrival_timeout_s", "rate_hz", "buffer_s"):
-            if not float(getattr(self, name)) > 0:
-                raise ConfigError(f"{self.key}.{name}", f"expected a number > 0, got {getattr(self, name)!r}")
+        require_positive(self, ("max_velocity_rad_s", "first_state_timeout_s", "arrival_tolerance_rad",
+                     "arrival_timeout_s", "rate_hz", "buffer_s"), self.key)
 
 
 class ShadowHand(_RosbridgeDevice, Hand):
@@ -281,9 +280,7 @@ class RosbridgeBiotacConfig:
 
     def __post_init__(self):
         self.fingers = check_fingers(self.fingers, f"{self.key}.fingers")
-        for name in ("rate_hz", "buffer_s", "first_frame_timeout_s"):
-            if not float(getattr(self, name)) > 0:
-                raise ConfigError(f"{self.key}.{name}", f"expected a number > 0, got {getattr(self, name)!r}")
+        require_positive(self, ("rate_hz", "buffer_s", "first_frame_timeout_s"), self.key)
 
 
 class RosbridgeBiotacs(_RosbridgeDevice, TactileSensors):

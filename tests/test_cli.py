@@ -1,7 +1,6 @@
 """tactile-run end to end: a real Hydra run in a subprocess, multirun, bad input, SIGKILL."""
 
 import json
-import os
 import signal
 import subprocess
 import sys

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hardware.arm import Arm
-from hardware.biotac import FINGERS, TactileSensors
+from hardware.biotac import TactileSensors
 from hardware.device import Clock, DeviceIdentity, WallClock
 from hardware.errors import NotConnectedError
 from hardware.hand import JOINT_NAMES, Hand

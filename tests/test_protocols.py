@@ -137,8 +137,6 @@ def test_operator_stop_retracts_and_aborts():
 
 
 def test_parallel_launchers_are_refused_for_real_hardware():
-    from types import SimpleNamespace
-
     from protocols.cli import _refuse_parallel_hardware
     hc = OmegaConf.create({"launcher": {"_target_": "hydra_plugins.hydra_joblib_launcher.JoblibLauncher"}})
     lab = OmegaConf.create({"hardware": {"backend": "lab"}})

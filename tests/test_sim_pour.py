@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hardware.sim import make_sim_lab
-from hardware.sim.scenarios import biotac_arrays, close_grasp, pour_until_slip, record
+from hardware.sim.scenarios import biotac_arrays, close_grasp, pour_until_slip
 
 LOOSE = {"pour": {"grip_n_per_rad": 2.0}}
 

@@ -255,7 +255,7 @@ def validate(cfg: SimConfig, key: str = "hardware") -> SimConfig:
     for n in ("pump", "scale"):
         ticks = 1.0 / (getattr(cfg, n).rate_hz * cfg.step_s)
         if abs(ticks - round(ticks)) > 1e-9 or round(ticks) < 1:
-            raise ConfigError(f"{key}.{n}.rate_hz", f"the period must be a whole number of step_s")
+            raise ConfigError(f"{key}.{n}.rate_hz", "the period must be a whole number of step_s")
     for f in cfg.fingers:
         if f not in cfg.fingertips:
             raise ConfigError(f"{key}.fingertips", f"no pose for finger {f!r}")

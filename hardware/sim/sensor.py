@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..biotac import FINGERS
 from .config import SensorModelConfig
 from .contact import counts_from_impedance, impedance_from_counts, impedance_kohm, pdc_rise, quantise
 
