@@ -2,7 +2,7 @@
 
     tactile-analyze run=outputs/2026-01-01/12-00-00_straws_sweep/run.zarr
     tactile-analyze run=outputs/2026-01-01 analysis.flow.method=dis    # every run.zarr below
-    tactile-analyze -m 'run=glob(outputs/*/*/run.zarr)'
+    tactile-analyze -m run=A/run.zarr,B/run.zarr                        # a list of runs
 
 Exit status: 0 analysed, 2 bad input or config (nothing written), 1 analysis failed. Errors
 are one line; ``verbose=true`` adds the traceback. Several runs (a directory, or ``-m``) also

@@ -108,7 +108,8 @@ def taxels(a, path: Path) -> None:
     ax2.plot(t, act, lw=0.6)
     ax2.set_ylabel("activation (kΩ)")
     ax2.set_xlabel("time since run start (s)")
-    ax2.legend(fontsize=8, ncol=6, loc="upper left", title="segments")
+    if ax2.get_legend_handles_labels()[0]:                  # no bands when nothing was segmented
+        ax2.legend(fontsize=8, ncol=6, loc="upper left", title="segments")
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
