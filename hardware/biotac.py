@@ -8,7 +8,9 @@ and PAC (dynamic pressure, vibration) at 2.2 kHz, delivered in batches with each
 
 from __future__ import annotations
 
+import threading
 from abc import abstractmethod
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,6 +78,32 @@ class BiotacFrame:
                    for a in (self.electrodes, self.pdc, self.tdc, self.tac, self.pac))
 
 
+class FrameTap:
+    """A second, independent copy of a sensor's frame stream (see :meth:`TactileSensors.tap`).
+
+    Bounded: it keeps the newest ``maxlen`` frames and counts the ones it had to drop
+    (``overflows``), so a consumer that stalls can never grow memory.
+    """
+
+    def __init__(self, maxlen: int):
+        self._frames: deque[BiotacFrame] = deque(maxlen=max(1, int(maxlen)))
+        self._lock = threading.Lock()
+        self.overflows = 0
+
+    def put(self, frame: BiotacFrame) -> None:
+        with self._lock:
+            if len(self._frames) == self._frames.maxlen:
+                self.overflows += 1
+            self._frames.append(frame)
+
+    def drain(self) -> list[BiotacFrame]:
+        """Every frame put since the last call, oldest first."""
+        with self._lock:
+            out = list(self._frames)
+            self._frames.clear()
+        return out
+
+
 class TactileSensors(Device):
     """The set of BioTacs on the hand, read as a stream of frames."""
 
@@ -100,3 +128,20 @@ class TactileSensors(Device):
         """The newest frame received, without consuming the stream (``None`` before the
         first). The run engine watches contact criteria with it while the recorder alone
         drains :meth:`read`."""
+
+    def tap(self, maxlen: int = 1000) -> FrameTap:
+        """A copy of every frame received from now on, for a consumer other than the
+        recorder (the live tactile-flow monitor): :meth:`read` still gets every frame.
+        Drivers hand each frame to :meth:`_publish` as they receive it."""
+        tap = FrameTap(maxlen)
+        self.__dict__.setdefault("_taps", []).append(tap)
+        return tap
+
+    def untap(self, tap: FrameTap) -> None:
+        taps = self.__dict__.get("_taps", [])
+        if tap in taps:
+            taps.remove(tap)
+
+    def _publish(self, frame: BiotacFrame) -> None:
+        for tap in self.__dict__.get("_taps", ()):
+            tap.put(frame)

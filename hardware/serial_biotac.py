@@ -354,5 +354,6 @@ class SerialBiotacs(TactileSensors):
             self.overflows += 1
         self._buffer.append(frame)
         self._latest = frame
+        self._publish(frame)
         self._first.set()
 

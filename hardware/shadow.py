@@ -354,6 +354,7 @@ class RosbridgeBiotacs(_RosbridgeDevice, TactileSensors):
             self.malformed += 1
             return
         self._frames.push(frame, host)
+        self._publish(frame)
 
     def _decode(self, msg: dict, host: float) -> BiotacFrame:
         tactiles = msg["tactiles"]

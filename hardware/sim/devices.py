@@ -315,9 +315,10 @@ class SimBiotac(_SimDevice, TactileSensors):
             e = self.rng.integers(-32768, 32767, (F, 24))
             pdc = self.rng.integers(-32768, 32767, F)
             w.truth.fault("biotac_corrupt", t, f"seq={self.seq}")
-        self._push(BiotacFrame(self.seq, self.device_time(t), self.host_time(t), e.astype(np.int16),
-                               pdc.astype(np.int32), tdc.astype(np.int32), tac.astype(np.int32),
-                               pac.astype(np.int16)))
+        frame = BiotacFrame(self.seq, self.device_time(t), self.host_time(t), e.astype(np.int16),
+                            pdc.astype(np.int32), tdc.astype(np.int32), tac.astype(np.int32), pac.astype(np.int16))
+        self._push(frame)
+        self._publish(frame)
 
     def read(self) -> list[BiotacFrame]:
         return self._drain()

@@ -1,0 +1,204 @@
+"""Slip detection on the online tactile-flow aggregates, one frame at a time.
+
+A held object that starts to slip shows in three ways on a fingertip, and
+:class:`SlipDetector` watches for each (per finger, only while the finger has been in
+steady contact for ``settle_s``):
+
+``release``
+    the stick-slip release when the object first gives: the skin's stored stretch and part
+    of the normal load are let go *at once*, so the total activation (the sum of the 24
+    filtered taxel activations, a PDC proxy) falls by more than ``release_drop`` of its value
+    in one frame, beyond its recent falling trend (an EMA of the per-frame relative change
+    with ``trend_tau_s``), while at least ``release_confidence`` of the footprint moves
+    (the flow confidence, in any view). The trend term is what keeps a finger that is
+    sliding off a feature, or being lifted, from firing: its pressure falls too, but
+    steadily.
+``creep``
+    persistent sliding: the mean flow vector, smoothed with ``creep_tau_s``, exceeds
+    ``creep_px`` px/frame and keeps its direction (persistence, |EMA of the vector| / EMA
+    of its length, at least ``creep_persistence``; 1 is a constant direction), in any view.
+``rotation``
+    the object turning in the grasp: the mean curl, smoothed with ``creep_tau_s``, exceeds
+    ``curl_min`` (1/frame) in magnitude in any view.
+
+``creep`` and ``rotation`` are flow the robot's own motion also makes (a finger swept on
+purpose across a surface slides and creeps): they only count while the robot is still
+(the ``still`` argument of :meth:`SlipDetector.update`). ``release`` needs no such gate.
+
+A finger whose stream pauses for more than ``max_gap_s`` (skipped, corrupt or missing
+frames) starts again from scratch: it must settle in contact anew before it can fire, so a
+finger coming back from a dropout never looks like a sudden change.
+
+The thresholds are chosen from simulated pours and sweeps (``benchmarks/bench_slip.py``
+reports the detection latency and the false alarms they give); every one is configurable.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+CAUSES = ("", "release", "creep", "rotation")
+"""Codes of :attr:`SlipState.cause`: 0 none, 1 release, 2 creep, 3 rotation."""
+
+
+@dataclass(frozen=True)
+class SlipConfig:
+    """Thresholds of :class:`SlipDetector` (see the module docstring). Units in brackets."""
+
+    contact_kohm: float = 0.5          # total activation that counts as contact [kΩ]
+    settle_s: float = 0.5              # contact held this long before a slip can be declared [s]
+    release_drop: float = 0.1          # one-frame relative fall of the total activation [1]
+    release_confidence: float = 0.2    # fraction of the footprint moving in that frame [1]
+    trend_tau_s: float = 0.1           # time constant of the pressure trend [s]
+    creep_px: float = 0.01             # smoothed mean-flow magnitude [px/frame]
+    creep_persistence: float = 0.7     # direction persistence of the smoothed flow [1]
+    creep_tau_s: float = 0.1           # time constant of the flow and curl smoothing [s]
+    curl_min: float = 0.001            # smoothed |curl| [1/frame]
+    max_gap_s: float = 0.05            # longer pauses of a finger's stream reset it [s]
+
+    def __post_init__(self):
+        for name, value in self.__dict__.items():
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"slip.{name}: expected a number > 0, got {value!r}")
+        if not self.creep_persistence <= 1:
+            raise ValueError(f"slip.creep_persistence: expected a value in (0, 1], got {self.creep_persistence}")
+
+
+@dataclass
+class SlipState:
+    """The detector's verdict after a frame. Arrays are per finger (F,).
+
+    Attributes:
+        t: time of the frame [s].
+        fired: the finger detected slip in this frame.
+        cause: code into :data:`CAUSES` of what fired (0 if nothing).
+        in_contact: the finger is in settled contact (the detector is armed for it).
+        first: ``(t, finger index, cause code)`` of the first detection since the last
+            :meth:`SlipDetector.rearm`, or ``None``.
+    """
+
+    t: float
+    fired: np.ndarray
+    cause: np.ndarray
+    in_contact: np.ndarray
+    first: tuple[float, int, int] | None = None
+
+    @property
+    def detected(self) -> bool:
+        return self.first is not None
+
+
+class SlipDetector:
+    """Per-finger slip detector over a stream of online flow aggregates.
+
+    Args:
+        n_fingers: F, the fingers of the stream (axis 0 of every input).
+        config: the thresholds.
+        watch: (F,) bool, the fingers to watch (default all); the others never fire.
+    """
+
+    def __init__(self, n_fingers: int, config: SlipConfig = SlipConfig(), watch=None):
+        self.config = config
+        F = int(n_fingers)
+        self.watch = np.ones(F, bool) if watch is None else np.asarray(watch, bool).copy()
+        if self.watch.shape != (F,):
+            raise ValueError(f"watch: expected ({F},) booleans, got shape {self.watch.shape}")
+        self._last_t = np.full(F, -np.inf)
+        self._prev_total = np.full(F, np.nan)
+        self._trend = np.zeros(F)
+        self._contact_since = np.full(F, np.nan)
+        self._flow = None                         # (F, V, 2) EMA of the mean flow vector
+        self._length = None                       # (F, V) EMA of its length
+        self._curl = None                         # (F, V) EMA of the curl
+        self.state = SlipState(-np.inf, np.zeros(F, bool), np.zeros(F, np.int8), np.zeros(F, bool))
+
+    def rearm(self) -> None:
+        """Forget the first detection (the per-finger state is kept)."""
+        self.state.first = None
+
+    def reset(self, finger: int) -> None:
+        """Start finger ``finger`` from scratch (as after a pause in its stream)."""
+        self._prev_total[finger] = np.nan
+        self._trend[finger] = 0.0
+        self._contact_since[finger] = np.nan
+        if self._flow is not None:
+            self._flow[finger] = 0.0
+            self._length[finger] = 0.0
+            self._curl[finger] = 0.0
+
+    def update(self, t: float, processed, total, mean, curl, confidence, still: bool = True) -> SlipState:
+        """Take one frame's aggregates; return the (reused) :class:`SlipState`.
+
+        Args:
+            t: frame time [s].
+            processed: (F,) bool, the fingers with a valid sample in this frame; the others
+                are left as they were (their values are ignored).
+            total: (F,) total filtered activation [kΩ].
+            mean: (F, V, 2) mean flow (col, row) per view [px/frame].
+            curl: (F, V) mean curl per view [1/frame].
+            confidence: (F, V) fraction of the footprint moving per view [1].
+            still: the robot is not moving the fingers (arms ``creep`` and ``rotation``).
+        """
+        c = self.config
+        mean = np.asarray(mean, float)
+        if self._flow is None:
+            self._flow = np.zeros(mean.shape)
+            self._length = np.zeros(mean.shape[:2])
+            self._curl = np.zeros(mean.shape[:2])
+        s = self.state
+        s.t = float(t)
+        s.fired[:] = False
+        s.cause[:] = 0
+        ok = np.asarray(processed, bool) & np.isfinite(total)
+        ok &= np.isfinite(mean).all(axis=(1, 2)) & np.isfinite(curl).all(axis=1) & np.isfinite(confidence).all(axis=1)
+        for f in np.flatnonzero(ok):
+            gap = t - self._last_t[f]
+            if not gap > 0:                                      # out of order: ignore
+                continue
+            if gap > c.max_gap_s:
+                self.reset(f)
+            self._last_t[f] = t
+            cause = self._finger(f, t, gap, float(total[f]), mean[f], curl[f], confidence[f], still)
+            s.in_contact[f] = t - self._contact_since[f] >= c.settle_s
+            if cause and self.watch[f]:
+                s.fired[f] = True
+                s.cause[f] = cause
+                if s.first is None:
+                    s.first = (s.t, int(f), cause)
+        return s
+
+    def _finger(self, f, t, dt, total, mean, curl, confidence, still) -> int:
+        c = self.config
+        prev = self._prev_total[f]
+        self._prev_total[f] = total
+        a_trend = 1.0 - math.exp(-dt / c.trend_tau_s)
+        a_flow = 1.0 - math.exp(-dt / c.creep_tau_s)
+        self._flow[f] += a_flow * (mean - self._flow[f])
+        self._length[f] += a_flow * (np.hypot(mean[:, 0], mean[:, 1]) - self._length[f])
+        self._curl[f] += a_flow * (curl - self._curl[f])
+        settled = t - self._contact_since[f] >= c.settle_s            # NaN (no contact) compares False
+        if total < c.contact_kohm:
+            self._contact_since[f] = np.nan
+        elif math.isnan(self._contact_since[f]):
+            self._contact_since[f] = t
+        if math.isnan(prev):
+            return 0
+        drop = (prev - total) / max(prev, c.contact_kohm)           # relative fall this frame
+        trend = self._trend[f]
+        self._trend[f] += a_trend * (drop - trend)
+        if not settled:
+            return 0
+        if drop - max(trend, 0.0) >= c.release_drop and confidence.max() >= c.release_confidence:
+            return 1
+        if not still:
+            return 0
+        speed = np.hypot(self._flow[f, :, 0], self._flow[f, :, 1])
+        persistence = speed / np.maximum(self._length[f], 1e-12)
+        if np.any((speed >= c.creep_px) & (persistence >= c.creep_persistence)):
+            return 2
+        if np.any(np.abs(self._curl[f]) >= c.curl_min):
+            return 3
+        return 0

@@ -1,0 +1,125 @@
+"""The slip detector (tactile/slip.py) on aggregate streams with known slips and known non-slips."""
+
+import numpy as np
+import pytest
+
+from tactile.slip import CAUSES, SlipConfig, SlipDetector
+
+RATE = 100.0
+
+
+def feed(det, total, mean=None, curl=None, confidence=None, still=True, processed=None, times=None):
+    """Feed (T, F) totals and (T, F, V, ...) aggregates; return [(t, finger, cause)] fired."""
+    total = np.asarray(total, float)
+    T, F = total.shape
+    mean = np.zeros((T, F, 1, 2)) if mean is None else np.asarray(mean, float)
+    curl = np.zeros((T, F, 1)) if curl is None else np.asarray(curl, float)
+    confidence = np.zeros((T, F, 1)) if confidence is None else np.asarray(confidence, float)
+    processed = np.ones((T, F), bool) if processed is None else np.asarray(processed, bool)
+    times = np.arange(T) / RATE if times is None else np.asarray(times, float)
+    fired = []
+    for i in range(T):
+        s = det.update(times[i], processed[i], total[i], mean[i], curl[i], confidence[i],
+                       still=still if np.isscalar(still) else bool(still[i]))
+        fired += [(round(float(times[i]), 3), int(k), CAUSES[s.cause[k]]) for k in np.flatnonzero(s.fired)]
+    return fired
+
+
+def grip(T=200, level=3.0, rng=None):
+    """A steady grasp: total activation ``level`` kΩ with a little noise, (T, 1)."""
+    rng = rng or np.random.default_rng(0)
+    return (level + rng.normal(0, 0.01, T))[:, None]
+
+
+def test_sudden_release_fires_in_its_frame():
+    total = grip()
+    total[120:] *= 0.78                              # the stored stretch let go at once
+    conf = np.zeros((200, 1, 1))
+    conf[120:123] = 0.5
+    det = SlipDetector(1)
+    fired = feed(det, total, confidence=conf)
+    assert fired[0] == (1.2, 0, "release")
+    assert det.state.first == (1.2, 0, 1)
+
+
+def test_no_slip_before_the_contact_has_settled():
+    total = grip()
+    total[:40] = 0.0                                 # contact from 0.4 s; settle 0.5 s
+    total[60:] *= 0.7                                # a drop only 0.2 s into the contact
+    conf = np.full((200, 1, 1), 0.5)
+    assert feed(SlipDetector(1), total, confidence=conf) == []
+
+
+def test_steady_fall_of_a_finger_sliding_off_a_feature_is_not_slip():
+    # pressure falling 5 % per frame with the whole footprint moving: a sweep leaving a straw
+    total = grip()
+    total[100:] = total[100:] * 0.95 ** np.arange(1, 101)[:, None]
+    conf = np.full((200, 1, 1), 0.8)
+    mean = np.zeros((200, 1, 1, 2))
+    mean[..., 0] = 0.05
+    assert feed(SlipDetector(1), total, mean=mean, confidence=conf, still=False) == []
+
+
+def test_creep_fires_when_still_and_not_during_own_motion():
+    total = grip(300)
+    mean = np.zeros((300, 1, 1, 2))
+    mean[150:, 0, 0] = [0.0, 0.02]                   # a steady downward creep
+    fired = feed(SlipDetector(1), total, mean=mean)
+    assert fired and fired[0][2] == "creep" and 1.5 < fired[0][0] <= 1.6
+    assert feed(SlipDetector(1), total, mean=mean, still=False) == []
+
+
+def test_flow_noise_without_a_direction_is_not_creep():
+    rng = np.random.default_rng(3)
+    total = grip(500)
+    angle = rng.uniform(0, 2 * np.pi, 500)
+    mean = (0.03 * np.stack([np.cos(angle), np.sin(angle)], -1))[:, None, None, :]
+    assert feed(SlipDetector(1), total, mean=mean) == []
+
+
+def test_rotation_fires_on_persistent_curl():
+    total = grip(300)
+    curl = np.zeros((300, 1, 1))
+    curl[200:] = 0.003
+    fired = feed(SlipDetector(1), total, curl=curl)
+    assert fired and fired[0][2] == "rotation" and 2.0 < fired[0][0] <= 2.2
+
+
+def test_a_finger_back_from_a_dropout_must_settle_again():
+    total = grip(300)
+    processed = np.ones((300, 1), bool)
+    processed[100:150] = False                       # 0.5 s without samples
+    total[150:] *= 0.5                               # and it comes back at another level
+    conf = np.full((300, 1, 1), 0.5)
+    assert feed(SlipDetector(1), total, confidence=conf, processed=processed) == []
+
+
+def test_nan_and_out_of_order_samples_are_ignored():
+    total = grip(200)
+    total[100, 0] = np.nan
+    mean = np.zeros((200, 1, 1, 2))
+    mean[101] = np.nan
+    times = np.arange(200) / RATE
+    times[120] = times[119] - 0.005                  # out of order
+    times[121] = times[119]                           # duplicate
+    conf = np.full((200, 1, 1), 0.5)
+    det = SlipDetector(1)
+    assert feed(det, total, mean=mean, confidence=conf, times=times) == []
+
+
+def test_only_watched_fingers_fire_and_rearm_forgets():
+    total = np.hstack([grip(), grip()])
+    total[120:] *= 0.7
+    conf = np.full((200, 2, 1), 0.5)
+    det = SlipDetector(2, watch=[False, True])
+    fired = feed(det, total, confidence=conf)
+    assert {k for _, k, _ in fired} == {1}
+    det.rearm()
+    assert not det.state.detected
+
+
+@pytest.mark.parametrize("key,value", [("release_drop", -0.1), ("settle_s", float("nan")),
+                                       ("creep_persistence", 1.5)])
+def test_bad_thresholds_are_refused_by_name(key, value):
+    with pytest.raises(ValueError, match=f"slip.{key}"):
+        SlipConfig(**{key: value})
