@@ -56,15 +56,22 @@ def aggregate_flow(flow, mask, noise: float = 0.05) -> FlowAggregates:
     if not mask.any():
         raise ValueError("mask: expected a footprint with at least one pixel, got an empty mask")
     n = len(flow)
-    weights = flow_functionals(mask).reshape(-1, 2, 4)                     # (H·W, 2, 4)
     sums, moving = np.empty((n, 4)), np.empty(n, np.float32)
-    _aggregate(np.ascontiguousarray(flow).reshape(n, -1), np.ascontiguousarray(weights[:, 0, 0]),
-               np.ascontiguousarray(weights[:, 0, 2]), np.ascontiguousarray(weights[:, 1, 2]),
-               mask.ravel().astype(np.float32), np.float32(noise) ** 2, sums, moving)
+    _aggregate(np.ascontiguousarray(flow).reshape(n, -1), *kernel_weights(mask, noise), sums, moving)
     mean, divergence, curl = sums[:, :2].copy(), sums[:, 2].copy(), sums[:, 3].copy()
     return FlowAggregates(mean=mean, magnitude=np.hypot(mean[:, 0], mean[:, 1]),
                           direction=np.arctan2(mean[:, 1], mean[:, 0]),
                           divergence=divergence, curl=curl, confidence=moving / np.float64(mask.sum()))
+
+
+def kernel_weights(mask, noise: float) -> tuple:
+    """The constant arguments of :func:`_aggregate` for a footprint (H, W) bool and a noise
+    level: ``(in_mask, d_col, d_row, mask01, noise2)``, computed once per view."""
+    mask = np.asarray(mask, dtype=bool)
+    weights = flow_functionals(mask).reshape(-1, 2, 4)                     # (H·W, 2, 4)
+    return (np.ascontiguousarray(weights[:, 0, 0]), np.ascontiguousarray(weights[:, 0, 2]),
+            np.ascontiguousarray(weights[:, 1, 2]), mask.ravel().astype(np.float32),
+            np.float32(noise) ** 2)
 
 
 @numba.njit(cache=True, nogil=True, fastmath={"reassoc"})

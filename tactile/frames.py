@@ -277,9 +277,14 @@ def render_activation(plan: FramePlan, mesh: SurfaceMesh, weights, activation, s
     """
     weights = np.asarray(weights, dtype=np.float64)
     activation = finite_array("activation", activation, ndim=2, last=weights.shape[1])
-    view_weights = weights[plan.vertices].T
-    return _render(plan, mesh, lambda a, b: activation[a:b] @ view_weights, scale, intensity_range,
-                   n_frames=len(activation))[0]
+    view_weights = np.ascontiguousarray(weights[plan.vertices].T)
+
+    def chunk(a, b):
+        out = np.empty((b - a, view_weights.shape[1]))
+        _interpolate(activation[a:b], view_weights, out)
+        return out
+
+    return _render(plan, mesh, chunk, scale, intensity_range, n_frames=len(activation))[0]
 
 
 def _render(plan, mesh, vertex_values, scale, intensity_range=None, fast=True, n_frames=None):
@@ -295,21 +300,50 @@ def _render(plan, mesh, vertex_values, scale, intensity_range=None, fast=True, n
     low, gain = _u8_mapping(*intensity_range) if to_u8 else (np.float32(0), np.float32(1))
     out = np.zeros((n_frames, h, w), np.uint8 if to_u8 else np.float32)
     none_f, none_u = np.zeros((0, h, w), np.float32), np.zeros((0, h, w), np.uint8)
+    geometry = frame_geometry(plan, mesh, scale, fast)
+    cache = frame_cache(plan)                    # each pixel's last triangle, across chunks
+    stats = np.zeros(2, np.int64)
+    for start in range(0, n_frames, _CHUNK):
+        stop = min(n_frames, start + _CHUNK)
+        chunk = np.ascontiguousarray(vertex_values(start, stop), dtype=np.float64)
+        stats += _render_frames(*geometry, chunk, cache, to_u8, low, gain,
+                                none_f if to_u8 else out[start:stop], out[start:stop] if to_u8 else none_u)
+    return out, int(stats[0]), int(stats[1])
+
+
+def frame_geometry(plan: FramePlan, mesh: SurfaceMesh, scale: float, fast: bool = True) -> tuple:
+    """The per-view constants of the compiled renderer, computed once per plan:
+    ``(base, step, scale, tris, neighbours, boundary, orientation, fast)`` as
+    :func:`_render_frames` and :func:`_render_frame` take them. ``fast=False`` (or a plan
+    without a :class:`WalkIndex`) z-buffers every frame."""
+    h, w = plan.shape
     walk = plan.walk
     if not fast or walk is None:                 # dummies of the right types: z-buffer only
         fast = False
         walk = WalkIndex(np.zeros((0, 3), np.uint32), np.zeros((0, 2), np.uint32), 1.0,
                          np.zeros((h, w), np.uint32))
     base, step, _, _, scale, tris = _kernel_args(plan, mesh, None, scale)
-    cache = walk.start.copy()                    # each pixel's last triangle, across chunks
-    stats = np.zeros(2, np.int64)
-    for start in range(0, n_frames, _CHUNK):
-        stop = min(n_frames, start + _CHUNK)
-        chunk = np.ascontiguousarray(vertex_values(start, stop), dtype=np.float64)
-        stats += _render_frames(base, step, chunk, scale, tris, walk.neighbours, walk.boundary,
-                                float(walk.orientation), cache, fast, to_u8, low, gain,
-                                none_f if to_u8 else out[start:stop], out[start:stop] if to_u8 else none_u)
-    return out, int(stats[0]), int(stats[1])
+    return base, step, scale, tris, walk.neighbours, walk.boundary, float(walk.orientation), bool(fast)
+
+
+def frame_cache(plan: FramePlan) -> np.ndarray:
+    """(H, W) uint32, each pixel's triangle to start the next frame's walk from: a new
+    sequence of frames starts from the plan's rest triangles (the renderer updates it)."""
+    h, w = plan.shape
+    return plan.walk.start.copy() if plan.walk is not None else np.zeros((h, w), np.uint32)
+
+
+def frame_scratch(plan: FramePlan) -> tuple:
+    """Work arrays of :func:`_render_frame` for one view (reusable across frames and
+    sequences; nothing in them carries from one frame to the next):
+    ``(us, vs, ds, vals, img, depth, winner, bary, slow, slow_px, cross_u, cross_d, n_cross)``.
+    ``img`` (H, W) float64 receives the rendered frame."""
+    h, w = plan.shape
+    k = len(plan.vertices)
+    return (np.empty(k), np.empty(k), np.empty(k), np.empty(k), np.zeros((h, w)), np.empty((h, w)),
+            np.empty((h, w), np.int32), np.empty((h, w, 3)), np.zeros((h, w), np.bool_),
+            np.empty((h * w, 2), np.int64), np.empty((h, _MAX_CROSSINGS)),
+            np.empty((h, _MAX_CROSSINGS), np.int64), np.zeros(h, np.int64))
 
 
 def _kernel_args(plan, mesh, values, scale):
@@ -689,14 +723,75 @@ def _fast_frame(us, vs, ds, vals, tris, neighbours, boundary, orientation, cache
 
 
 @numba.njit(cache=True, nogil=True)
-def _render_frames(base, step, vertex_values, scale, tris, neighbours, boundary, orientation, cache,
-                   fast, to_u8, low, gain, out_f, out_u):
+def _interpolate(activation, view_weights, out):
+    """``out[t, k] = Σ_c activation[t, c]·view_weights[c, k]``, summed in taxel order.
+
+    Every row is computed on its own with the same arithmetic, so a frame's vertex values
+    do not depend on the other frames computed with it (a BLAS product's blocking, and
+    so its rounding, depends on the number of rows): a frame rendered alone, as
+    :mod:`tactile.online` does, is bit-identical to the same frame rendered in a chunk."""
+    n_c, n_k = view_weights.shape
+    for t in range(activation.shape[0]):
+        row = out[t]
+        row[:] = 0.0
+        for c in range(n_c):
+            a = activation[t, c]
+            for k in range(n_k):
+                row[k] += a * view_weights[c, k]
+
+
+@numba.njit(cache=True, nogil=True)
+def _render_frame(base, step, scale, tris, neighbours, boundary, orientation, fast, vertex_values, cache,
+                  us, vs, ds, vals, img, depth, winner, bary, slow, slow_px, cross_u, cross_d, n_cross):
+    """Render one frame of (K,) vertex values into ``img`` (H, W) float64: through
+    :func:`_fast_frame` if ``fast``, else (or when it declines) through :func:`_zbuffer`.
+    Arguments: :func:`frame_geometry`, the values, ``cache`` (:func:`frame_cache`, updated)
+    and :func:`frame_scratch`. Returns the pixels z-tested one by one, or −1 if the frame
+    was z-buffered in full."""
+    _project(base, step, vertex_values, scale, us, vs, ds, vals)
+    n_slow = -1
+    if fast:
+        n_slow = _fast_frame(us, vs, ds, vals, tris, neighbours, boundary, orientation, cache,
+                             img, slow, cross_u, cross_d, n_cross, slow_px)
+    if n_slow < 0:
+        _zbuffer(us, vs, ds, vals, tris, img, depth, winner, bary)
+    return n_slow
+
+
+@numba.njit(cache=True, nogil=True)
+def _store_u8(img, low, gain, out):
+    """``out`` (H, W) uint8 ← ``img``: (value − low)·gain in float32, rounded half to even,
+    clipped to 0..255: exactly :func:`to_uint8`."""
+    h, w = img.shape
+    for i in range(h):
+        for j in range(w):
+            x = np.rint((np.float32(img[i, j]) - low) * gain)
+            out[i, j] = 0 if x < 0 else (255 if x > 255 else np.uint8(x))
+
+
+@numba.njit(cache=True, nogil=True)
+def _render_activation_u8(activation, view_weights, base, step, scale, tris, neighbours, boundary,
+                          orientation, fast, cache, low, gain, out, vertex_values, us, vs, ds, vals, img,
+                          depth, winner, bary, slow, slow_px, cross_u, cross_d, n_cross):
+    """One 8-bit frame (H, W) into ``out`` from one sample of (C,) taxel ``activation``,
+    allocating nothing: :func:`_interpolate` into ``vertex_values`` (K,), :func:`_render_frame`,
+    :func:`_store_u8`. Bit-identical to that frame of :func:`render_activation` given the
+    same ``cache`` state. Returns as :func:`_render_frame`."""
+    _interpolate(activation.reshape(1, -1), view_weights, vertex_values.reshape(1, -1))
+    n_slow = _render_frame(base, step, scale, tris, neighbours, boundary, orientation, fast, vertex_values,
+                           cache, us, vs, ds, vals, img, depth, winner, bary, slow, slow_px, cross_u,
+                           cross_d, n_cross)
+    _store_u8(img, low, gain, out)
+    return n_slow
+
+
+@numba.njit(cache=True, nogil=True)
+def _render_frames(base, step, scale, tris, neighbours, boundary, orientation, fast, vertex_values, cache,
+                   to_u8, low, gain, out_f, out_u):
     """Render (T, K) vertex values into ``out_f`` (T, H, W) float32, or into ``out_u`` as
-    8-bit frames ((value − low)·gain in float32, rounded half to even, clipped: exactly
-    :func:`to_uint8`). Frames go through :func:`_fast_frame` if ``fast``, else (or when it
-    declines) through :func:`_zbuffer`; ``cache`` (H, W) holds each pixel's triangle to start
-    its walk from and is updated. Returns (frames z-buffered in full, pixels z-tested one by
-    one by the fast path)."""
+    8-bit frames (:func:`_store_u8`), one :func:`_render_frame` each; ``cache`` (H, W) holds
+    each pixel's triangle to start its walk from and is updated. Returns (frames z-buffered
+    in full, pixels z-tested one by one by the fast path)."""
     h, w = cache.shape
     k = base.shape[1]
     us, vs, ds, vals = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
@@ -707,22 +802,18 @@ def _render_frames(base, step, vertex_values, scale, tris, neighbours, boundary,
     n_cross = np.zeros(h, np.int64)
     stats = np.zeros(2, np.int64)             # frames z-buffered in full, pixels z-tested alone
     for t in range(vertex_values.shape[0]):
-        _project(base, step, vertex_values[t], scale, us, vs, ds, vals)
-        n_slow = -1
-        if fast:
-            n_slow = _fast_frame(us, vs, ds, vals, tris, neighbours, boundary, orientation, cache,
-                                 img, slow, cross_u, cross_d, n_cross, slow_px)
+        n_slow = _render_frame(base, step, scale, tris, neighbours, boundary, orientation, fast,
+                               vertex_values[t], cache, us, vs, ds, vals, img, depth, winner, bary, slow,
+                               slow_px, cross_u, cross_d, n_cross)
         if n_slow < 0:
-            _zbuffer(us, vs, ds, vals, tris, img, depth, winner, bary)
             stats[0] += 1
         else:
             stats[1] += n_slow
-        for i in range(h):
-            for j in range(w):
-                if to_u8:
-                    x = np.rint((np.float32(img[i, j]) - low) * gain)
-                    out_u[t, i, j] = 0 if x < 0 else (255 if x > 255 else np.uint8(x))
-                else:
+        if to_u8:
+            _store_u8(img, low, gain, out_u[t])
+        else:
+            for i in range(h):
+                for j in range(w):
                     out_f[t, i, j] = img[i, j]
     return stats
 
