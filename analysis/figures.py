@@ -1,7 +1,8 @@
 """Figures (PNG, matplotlib Agg): what a researcher would put in a paper.
 
 - ``electrodes.png``: raw vs Kalman+RTS smoothed activation of the most active taxels;
-- ``pressure.png``: pressure per finger with its peaks/troughs and coloured segment bands;
+- ``pressure.png``: pressure per finger with its peaks/troughs and coloured segment bands, and
+  markers where the live slip detector fired and the protocol's reactions were issued;
 - ``taxels.png``: every taxel's smoothed activation (kΩ) over time, with the same bands;
 - ``ellipsoid.png``: the interpolated activation on the fitted ellipsoid (3D) at peak pressure;
 - ``flow_<finger>_s<id>_<label>.png``: per segment, one panel per view: the tactile frame at the
@@ -39,6 +40,14 @@ def _bands(ax, a, finger):
         ax.axvspan(t0, t1, color=COLOURS.get(sg.label, "#eeeeee"), alpha=0.25, lw=0,
                    label=None if sg.label in seen else sg.label)
         seen.add(sg.label)
+
+
+def _reactions(ax, a) -> None:
+    """Vertical markers at the live slip detections and the reactions they triggered."""
+    for kind, style in (("slip", dict(color="C3", ls="--", lw=1.2)), ("reaction", dict(color="C2", ls="-", lw=1.2))):
+        for i, (t, name, detail) in enumerate(a.run.events.of_kind(kind)):
+            what = f"live slip detected ({name}, {detail.get('cause', '?')})" if kind == "slip" else "reactions issued"
+            ax.axvline(t, **style, label=what if i == 0 else None)
 
 
 def _main_finger(a) -> tuple[str, int]:
@@ -85,6 +94,7 @@ def pressure(a, path: Path) -> None:
             ax.plot(t[ex.troughs], p[ex.troughs], "^", color="C0", label="troughs")
         if f in a.thresholds:
             ax.axhline(a.thresholds[f], color="C7", ls=":", lw=1, label="contact threshold")
+        _reactions(ax, a)
         ax.set_ylabel(unit)
         ax.set_title(f"{f}: pressure, peaks and segments ({a.scheme} labels)")
         ax.legend(fontsize=8, ncol=4, loc="upper left")

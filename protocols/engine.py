@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hardware.errors import DeviceError, ProtectiveStopError
+from tactile.slip import CAUSES
 
 from .interlocks import InterlockTripped, Interlocks, SafetyConfig
 from .plan import Geometry, Limits, Plan, PlannedStep
@@ -49,8 +50,11 @@ class Outcome:
 class RunContext(Geometry):
     """What a step's ``run`` sees: the lab, the recorder, parameters and helpers."""
 
-    def __init__(self, lab, recorder, cfg, progress=None):
+    def __init__(self, lab, recorder, cfg, progress=None, live=None):
         super().__init__(cfg.hardware, lab.surface, cfg.protocol.finger)
+        self.live = live                          # a protocols.live.LiveMonitor, or None
+        self.hand_targets: dict[str, float] = {}  # joint angles commanded so far (rad)
+        self.hand_until = -np.inf                 # clock time the commanded hand motion ends
         self.lab, self.recorder, self.params = lab, recorder, cfg.protocol
         self.limits = Limits.from_hardware(cfg.hardware)
         self.clock = lab.clock
@@ -82,6 +86,28 @@ class RunContext(Geometry):
         if self.lab.arm.is_protective_stopped():
             raise ProtectiveStopError("arm: protective stop")
         self.interlocks.check(self.lab, self.recorder)
+        if self.live is not None:
+            self.live.poll(still=self.clock.now() >= self.hand_until and not self.lab.arm.is_moving())
+
+    def hand_move(self, targets: dict[str, float], duration: float) -> None:
+        """Command hand joints (rad) over ``duration`` s without waiting; remembered as the
+        commanded angles (what ``tighten`` adds to) and as motion (no creep-slip meanwhile)."""
+        self.lab.hand.move_to(targets, duration, wait=False)
+        self.hand_targets.update(targets)
+        self.hand_until = self.clock.now() + duration
+
+    def slip_detected(self) -> bool:
+        return self.live is not None and self.live.detector.state.detected
+
+    def react(self, reactions) -> None:
+        """Run the ``on_slip`` reactions now, recording the detection and each reaction."""
+        t_frame, k, cause = self.live.detector.state.first
+        finger = self.live.fingers[k]
+        self.event("slip", finger, {"cause": CAUSES[cause], "frame_time": round(t_frame, 4)})
+        for r in reactions:
+            r.react(self)
+            self.event("reaction", r.kind, {"key": r.key, "params": r.describe(), "finger": finger,
+                                            "after_frame_s": round(self.recorder.now() - t_frame, 4)})
 
     def tare(self, seconds: float = TARE_S) -> None:
         """Average PDC at rest, the zero of the contact criteria (and of the analysis)."""
@@ -109,6 +135,8 @@ class RunContext(Geometry):
         """Whether ``crit`` holds now; ``contact_lost`` needs the fingers that were ``touched``."""
         if crit is None:
             return False
+        if crit.slip and self.slip_detected():
+            return True
         rise = self.pdc_rise()
         if rise is not None:
             if crit.pdc_rise is not None and rise[self.finger_index] > crit.pdc_rise:
@@ -133,12 +161,21 @@ class RunContext(Geometry):
                 return True
         return False
 
-    def wait(self, seconds: float, until: Criterion | None = None) -> bool:
-        """Keep still for ``seconds``, or until ``until`` holds (returns True then)."""
+    def wait(self, seconds: float, until: Criterion | None = None, on_slip=None) -> bool:
+        """Keep still for ``seconds``, or until ``until`` holds (returns True then); run the
+        ``on_slip`` reactions the moment the slip detector fires (once)."""
         end = self.clock.now() + seconds
         touched: set[int] = set()
+        reacting = bool(on_slip) or (until is not None and bool(until.slip))
+        if reacting:
+            if self.live is None:
+                raise RuntimeError("a step reacts to slip but the live monitor is off (live.enabled)")
+            self.live.detector.rearm()            # only slips from now on count
         while self.clock.now() < end - 1e-9:
             self._tick()
+            if on_slip and self.slip_detected():
+                self.react(on_slip)
+                on_slip = None
             if until is not None and until.contact_lost is not None:
                 rise = self.pdc_rise()
                 if rise is not None:
@@ -154,11 +191,12 @@ class RunContext(Geometry):
 class RunEngine:
     """Runs a :class:`~protocols.plan.Plan` on a connected lab, recording as it goes."""
 
-    def __init__(self, lab, recorder, cfg, plan: Plan, progress_factory=None, log=print):
+    def __init__(self, lab, recorder, cfg, plan: Plan, progress_factory=None, log=print, live=None):
         self.lab, self.recorder, self.cfg, self.plan = lab, recorder, cfg, plan
         self.progress_factory = progress_factory
         self.log = log
-        self.ctx = RunContext(lab, recorder, cfg)
+        self.ctx = RunContext(lab, recorder, cfg, live=live)
+        self._display = live.display if live is not None else None
         self._interrupts = 0
 
     def run(self) -> Outcome:
@@ -166,6 +204,8 @@ class RunEngine:
         with self._signals():
             try:
                 self.ctx.tare()
+                if self.ctx.live is not None:
+                    self.ctx.live.begin()
                 for planned in self.plan.steps:
                     self._run_step(planned)
                     done += 1
@@ -198,6 +238,8 @@ class RunEngine:
                                                     "expected_s": round(planned.duration, 3)})
         bar = self.progress_factory(planned) if self.progress_factory else None
         self.ctx.progress = bar.update if bar else None
+        if bar and self.ctx.live is not None:         # the live line rides on the step's bar
+            self.ctx.live.display = bar.set_postfix_str
         try:
             try:
                 step.run(self.ctx)
@@ -214,6 +256,8 @@ class RunEngine:
             if bar:
                 bar.close()
             self.ctx.progress = None
+            if self.ctx.live is not None:
+                self.ctx.live.display = self._display
         self.ctx.event("step_end", planned.name, {"key": step.key})
 
     def _make_safe(self, retract: bool) -> None:

@@ -199,6 +199,13 @@ class Plan:
     def duration(self) -> float:
         return self.steps[-1].start + self.steps[-1].duration if self.steps else 0.0
 
+    def slip_steps(self) -> list[str]:
+        """YAML keys of the steps that react to slip (``until: slip`` or ``on_slip``)."""
+        def reacts(step):
+            until = getattr(step, "until", None)
+            return bool(getattr(step, "on_slip", None)) or (until is not None and bool(until.slip))
+        return [p.step.key for p in self.steps if reacts(p.step)]
+
 
 def make_plan(cfg) -> Plan:
     """Parse and check ``cfg.protocol`` against ``cfg.hardware`` and ``cfg.surface``.

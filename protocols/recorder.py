@@ -176,6 +176,7 @@ class Recorder:
                        for s in sources}
         self._stats = {s: StreamStats() for s in sources}
         self._events: list[tuple] = []
+        self._live: list[dict] = []                       # rows of the online flow (protocols.live)
         self._outbox: dict[str, list[dict]] = {}          # block -> column dicts not yet appended
         self._last_seq: int | None = None                 # newest BioTac frame written
         self._last_frame_time: float | None = None
@@ -271,6 +272,11 @@ class Recorder:
         t = self.now()
         with self._lock:
             self._events.append((t, kind, name, detail))
+
+    def live(self, columns: dict[str, np.ndarray]) -> None:
+        """Queue rows of the ``live`` block (the online tactile flow; thread-safe)."""
+        with self._lock:
+            self._live.append(columns)
 
     def last_sample_age(self, stream: str) -> float:
         """Clock seconds since the newest sample of ``stream`` was received (since the start
@@ -375,6 +381,9 @@ class Recorder:
                     self._convert(name, samples)
             with self._lock:
                 events, self._events = self._events, []
+                live, self._live = self._live, []
+            if live:
+                self._outbox.setdefault("live", []).extend(live)
             if events:
                 self._outbox.setdefault("events", []).append(_event_columns(events))
             if self._outbox:

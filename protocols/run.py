@@ -14,13 +14,17 @@ from pathlib import Path
 from omegaconf import OmegaConf
 from tqdm import tqdm
 
+from hardware.errors import ConfigError
 from tactile.geometry import load_taxels
+from tactile.pipeline import TactileModel
 
 from . import provenance
 from .engine import FAILED, Outcome, RunEngine
 from .lab import make_lab
+from .live import LiveMonitor, live_fingers, live_settings, tactile_config, terminal_display
 from .plan import Plan, format_timeline, make_plan
 from .recorder import Recorder
+from .steps import ProtocolError
 from .store import RunStore, utc_now
 
 ANALYSIS_ENTRY_POINTS = "tactile_flow.analysis"
@@ -56,6 +60,8 @@ def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
         console(format_timeline(plan))
         return RunResult("planned", run_dir, plan)
 
+    live = live_settings(cfg)
+    model = live_model(cfg, plan)
     lab = make_lab(cfg)
     run_dir.mkdir(parents=True, exist_ok=True)
     store_path = run_dir / "run.zarr"
@@ -64,17 +70,24 @@ def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
                                   _calibration(lab), cfg.hardware.get("seed"), protocol=plan.protocol)
         store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
                                 run_id=prov["run_id"], provenance=provenance.summary(prov),
-                                attrs={"labels": plan.labels, "plan_duration_s": plan.duration})
+                                attrs={"labels": plan.labels, "plan_duration_s": plan.duration},
+                                live=(live_fingers(live, lab.biotac.fingers), model.config.views) if model else None)
         recorder = Recorder(store, {"biotac": lab.biotac.read, "arm": lab.arm.read_states,
                                     "hand": lab.hand.read_states, "pump": lab.pump.read_states,
                                     "scale": lab.scale.read}, lab.clock).start()
+        monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
+                              display=None if cfg.progress else terminal_display()) if model else None
         outcome = Outcome(FAILED, "the run engine could not start")
         try:
-            outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=_bars(cfg.progress), log=console).run()
+            outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=_bars(cfg.progress), log=console,
+                                live=monitor).run()
         finally:
+            attrs = {"error": outcome.error}
+            if monitor is not None:
+                attrs["live"] = monitor.close()
             truth = lab.truth.to_dict() if getattr(lab, "truth", None) is not None else None
             try:
-                stats = recorder.stop(outcome.status, truth=truth, attrs={"error": outcome.error})
+                stats = recorder.stop(outcome.status, truth=truth, attrs=attrs)
             except Exception as exc:
                 cause = recorder.writer_error or exc
                 console(f"run {run_dir}: {outcome.status} ({outcome.error})")
@@ -84,6 +97,29 @@ def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
             provenance.write_run_json(run_dir / "run.json", prov, status=outcome.status, end_time=utc_now(),
                                       extra={"error": outcome.error, "store": store_path.name})
     return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)
+
+
+def live_model(cfg, plan: Plan) -> TactileModel | None:
+    """The online tactile model when the run computes live flow (``live.enabled``, or auto
+    when a step reacts to slip), else ``None``. A protocol that reacts to slip with the live
+    monitor turned off is refused here, before anything moves."""
+    try:
+        live = live_settings(cfg)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError("live", str(exc)) from None
+    reacting = plan.slip_steps()
+    if live.enabled is False and reacting:
+        raise ProtocolError(reacting[0], "reacts to slip, but live.enabled=false turns the slip detector off; "
+                                         "drop live.enabled=false or the step's until: slip / on_slip")
+    if not (live.enabled or reacting):
+        return None
+    unknown = [f for f in live.fingers or () if f not in cfg.hardware.fingers]
+    if unknown:
+        raise ConfigError("live.fingers", f"{unknown} have no sensor in hardware.fingers {list(cfg.hardware.fingers)}")
+    try:
+        return TactileModel.build(tactile_config(cfg.get("analysis") or {}, live.views))
+    except ValueError as exc:
+        raise ConfigError("live", str(exc)) from None
 
 
 def hand_off(result: RunResult, analysis_cfg, console=print) -> dict | None:

@@ -19,6 +19,7 @@ from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
 from .interlocks import SafetyConfig
+from .live import LiveConfig
 
 
 @dataclass
@@ -38,6 +39,7 @@ class ProtocolConfig:
     pour_rate: float = 60.0            # ml/min
     pour_volume: float = 400.0         # ml, the most the pour step may dispense
     grasp_flexion: float = 1.2         # rad, summed over the two flexion joints of each finger
+    tighten_flexion: float = 0.2       # rad, added to each finger's closure by a `tighten` reaction
     hold_time: float = 1.0             # s
     steps: list[Any] = field(default_factory=list)
 
@@ -51,6 +53,7 @@ class RunConfig:
     surface: Any = None
     analysis: Any = field(default_factory=dict)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    live: LiveConfig = field(default_factory=LiveConfig)
     plan_only: bool = False            # expand and check the plan, print it, touch no hardware
     analyze: bool = True               # hand the run to the analysis pipeline when it ends
     verbose: bool = False              # tracebacks on errors
@@ -66,6 +69,8 @@ def check_targets(node, key: str = "") -> None:
     """Refuse any ``_target_`` outside :data:`ALLOWED_TARGETS`: a config must never make the
     framework import or call arbitrary code."""
     from omegaconf import DictConfig, ListConfig
+    if isinstance(node, (DictConfig, ListConfig)) and node._is_none():
+        return
     if isinstance(node, DictConfig):
         for k in node.keys():
             child = f"{key}.{k}" if key else str(k)

@@ -51,11 +51,14 @@ class Criterion:
     ``pdc_rise``: PDC of the protocol's finger this many counts above its tare value.
     ``contact_lost``: every grasp finger's PDC back within this many counts of its tare.
     ``force``: TCP force magnitude above this many newtons.
+    ``slip``: the live slip detector fired (:mod:`protocols.live`); ``until: slip`` is
+    short for ``until: {slip: true}``.
     """
 
     pdc_rise: float | None = None
     contact_lost: float | None = None
     force: float | None = None
+    slip: bool | None = None
 
     def describe(self) -> str:
         return ", ".join(f"{k}={v}" for k, v in dataclasses.asdict(self).items() if v is not None) or "none"
@@ -75,6 +78,10 @@ class Step:
     def run(self, ctx) -> None:  # pragma: no cover - every step overrides it
         raise NotImplementedError
 
+    def react(self, ctx) -> None:
+        """Act at once, without waiting (a reaction in ``on_slip``); only :data:`REACTIONS` can."""
+        raise NotImplementedError(f"{self.kind} cannot be a reaction")
+
     def describe(self) -> str:
         fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "key"}
         return ", ".join(f"{k}={_short(v)}" for k, v in fields.items() if v is not None)
@@ -83,6 +90,8 @@ class Step:
 def _short(v):
     if isinstance(v, Criterion):
         return "{" + v.describe() + "}"
+    if isinstance(v, list) and v and isinstance(v[0], Step) and all(x.kind in REACTIONS for x in v):
+        return "[" + ", ".join(x.kind for x in v) + "]"
     if isinstance(v, list) and v and isinstance(v[0], Step):
         return f"[{len(v)} steps]"
     return v
@@ -229,7 +238,7 @@ class Grasp(Step):
         return _still(ctx, self.duration, f"{self.key}.duration")
 
     def run(self, ctx):
-        ctx.lab.hand.move_to(self.targets(ctx), self.duration, wait=False)
+        ctx.hand_move(self.targets(ctx), self.duration)
         ctx.wait(self.duration)
 
 
@@ -246,9 +255,95 @@ class Release(Step):
 
     def run(self, ctx):
         ctx.lab.pump.stop()
-        ctx.lab.hand.move_to({j: 0.0 for joints in FLEX_JOINTS.values() for j in joints},
-                             self.duration, wait=False)
+        ctx.hand_move({j: 0.0 for joints in FLEX_JOINTS.values() for j in joints}, self.duration)
         ctx.wait(self.duration)
+
+
+@step
+@dataclass
+class Tighten(Step):
+    """Close the grasp further: each of ``fingers`` flexes its two distal joints by
+    ``flexion`` rad more in total (half each), from their commanded angles, over ``duration``
+    s. As a step it waits ``duration``; as a reaction (``on_slip``) it returns at once."""
+
+    kind: ClassVar[str] = "tighten"
+    fingers: list[str] = field(default_factory=lambda: ["ff", "mf", "th"])
+    flexion: float = 0.2
+    duration: float = 0.2
+
+    def targets(self, ctx) -> dict[str, float]:
+        out = {}
+        for i, f in enumerate(self.fingers):
+            if f not in FLEX_JOINTS:
+                raise ProtocolError(f"{self.key}.fingers[{i}]", f"expected one of {list(FLEX_JOINTS)}, got {f!r}")
+            out.update({j: ctx.hand_targets.get(j, 0.0) + self.flexion / 2 for j in FLEX_JOINTS[f]})
+        return out
+
+    def check(self, ctx) -> None:
+        if not (0 < self.flexion <= MAX_TIGHTEN):
+            raise ProtocolError(f"{self.key}.flexion", f"expected an increment in (0, {MAX_TIGHTEN}] rad, "
+                                                       f"got {self.flexion}")
+        _positive(self.duration, f"{self.key}.duration")
+        for i, f in enumerate(self.fingers):
+            if f not in FLEX_JOINTS:
+                raise ProtocolError(f"{self.key}.fingers[{i}]", f"expected one of {list(FLEX_JOINTS)}, got {f!r}")
+
+    def plan(self, ctx):
+        self.check(ctx)
+        return _still(ctx, self.duration, f"{self.key}.duration")
+
+    def run(self, ctx):
+        self.react(ctx)
+        ctx.wait(self.duration)
+
+    def react(self, ctx):
+        ctx.hand_move(self.targets(ctx), self.duration)
+
+
+@step
+@dataclass
+class StopPump(Step):
+    """Stop the pump (the pour ends here)."""
+
+    kind: ClassVar[str] = "stop_pump"
+
+    def check(self, ctx) -> None:
+        pass
+
+    def run(self, ctx):
+        self.react(ctx)
+
+    def react(self, ctx):
+        ctx.lab.pump.stop()
+
+
+@step
+@dataclass
+class Mark(Step):
+    """Record an event of kind ``mark`` named ``name`` (with ``note``) in the run store."""
+
+    kind: ClassVar[str] = "mark"
+    name: str = "mark"
+    note: str | None = None
+
+    def check(self, ctx) -> None:
+        pass
+
+    def run(self, ctx):
+        self.react(ctx)
+
+    def react(self, ctx):
+        ctx.event("mark", self.name, {"note": self.note} if self.note else None)
+
+
+REACTIONS = ("tighten", "stop_pump", "mark")
+"""Step kinds allowed in ``on_slip``: they act at once, so the reaction is never held up."""
+MAX_TIGHTEN = 0.5               # rad, the largest single grasp increment a protocol may ask for
+
+
+def _check_reactions(ctx, on_slip, key: str) -> None:
+    for r in on_slip or ():
+        r.check(ctx)
 
 
 # The two distal flexion joints of each finger (J1 and J2 are coupled on the real hand).
@@ -268,6 +363,13 @@ class Pour(Step):
     kind: ClassVar[str] = "pour"
     rate: float | None = None
     volume: float | None = None
+    until: Criterion | None = None
+    on_slip: list[Step] | None = None
+
+    @property
+    def waits(self) -> bool:
+        """With ``until`` or ``on_slip`` the step lasts as long as the pour (volume / rate)."""
+        return self.until is not None or bool(self.on_slip)
 
     def plan(self, ctx):
         rate = ctx.params.pour_rate if self.rate is None else self.rate
@@ -277,14 +379,18 @@ class Pour(Step):
         if rate > ctx.limits.max_pump_rate:
             raise ProtocolError(f"{self.key}.rate", f"{rate} ml/min exceeds the pump's limit "
                                                     f"hardware.pump.max_rate_ml_min={ctx.limits.max_pump_rate}")
+        ctx.check_criterion(self.until, f"{self.key}.until")
+        _check_reactions(ctx, self.on_slip, f"{self.key}.on_slip")
         ctx.pour_until = ctx.time + volume / rate * 60.0
-        return [], 0.0
+        return _still(ctx, volume / rate * 60.0, f"{self.key}.volume") if self.waits else ([], 0.0)
 
     def run(self, ctx):
         rate = ctx.params.pour_rate if self.rate is None else self.rate
         volume = ctx.params.pour_volume if self.volume is None else self.volume
         ctx.event("pour", self.key, {"rate_ml_min": rate, "volume_ml": volume})
         ctx.lab.pump.dispense(volume, rate)
+        if self.waits:
+            _wait_reacting(ctx, volume / rate * 60.0, self)
 
 
 @step
@@ -295,17 +401,23 @@ class Hold(Step):
     kind: ClassVar[str] = "hold"
     duration: float | None = None
     until: Criterion | None = None
+    on_slip: list[Step] | None = None
 
     def plan(self, ctx):
         ctx.check_criterion(self.until, f"{self.key}.until")
+        _check_reactions(ctx, self.on_slip, f"{self.key}.on_slip")
         return _still(ctx, ctx.params.hold_time if self.duration is None else self.duration,
                       f"{self.key}.duration")
 
     def run(self, ctx):
-        duration = ctx.params.hold_time if self.duration is None else self.duration
-        met = ctx.wait(duration, until=self.until)
-        if self.until is not None:
-            ctx.event("criterion" if met else "timeout", self.key, {"until": self.until.describe()})
+        _wait_reacting(ctx, ctx.params.hold_time if self.duration is None else self.duration, self)
+
+
+def _wait_reacting(ctx, seconds: float, s) -> None:
+    """Wait ``seconds`` or until ``s.until``; run ``s.on_slip`` the moment slip is detected."""
+    met = ctx.wait(seconds, until=s.until, on_slip=s.on_slip)
+    if s.until is not None:
+        ctx.event("criterion" if met else "timeout", s.key, {"until": s.until.describe()})
 
 
 @step
@@ -387,7 +499,19 @@ def parse_step(item, key: str, depth: int = 0) -> Step:
     values = {name: _convert(value, fields[name].type, f"{key}.{name}") for name, value in params.items()}
     if kind == "repeat":
         values["steps"] = parse_steps(params.get("steps"), f"{key}.steps", depth + 1)
+    if params.get("on_slip") is not None:
+        values["on_slip"] = parse_reactions(params["on_slip"], f"{key}.on_slip")
     return cls(key=key, **values)
+
+
+def parse_reactions(items, key: str) -> list[Step]:
+    """``on_slip``: a non-empty list of steps of the :data:`REACTIONS` kinds."""
+    steps = parse_steps(items, key, MAX_NESTING)
+    for i, s in enumerate(steps):
+        if s.kind not in REACTIONS:
+            raise ProtocolError(f"{key}[{i}].{s.kind}", f"cannot react to slip (it would hold the reaction up); "
+                                                        f"on_slip takes {', '.join(REACTIONS)}")
+    return steps
 
 
 _SCALARS = {"float": (int, float), "int": (int,), "str": (str,), "bool": (bool,)}
@@ -405,6 +529,8 @@ def _convert(value, annotation: str, key: str) -> Any:
             if opt == "float" and not math.isfinite(value):
                 raise ProtocolError(key, f"expected a finite number, got {value!r}")
             return float(value) if opt == "float" else value
+        if opt == "Criterion" and value == "slip":
+            return Criterion(slip=True)
         if opt == "Criterion" and isinstance(value, dict):
             names = {f.name for f in dataclasses.fields(Criterion)}
             unknown = sorted(set(value) - names)
@@ -415,7 +541,8 @@ def _convert(value, annotation: str, key: str) -> Any:
             if "pdc_rise" in value and "contact_lost" in value:
                 raise ProtocolError(key, "pdc_rise (contact made) and contact_lost (contact gone) contradict "
                                          "each other; give one")
-            return Criterion(**{k: _convert(v, "float", f"{key}.{k}") for k, v in value.items()})
+            return Criterion(**{k: _convert(v, "bool" if k == "slip" else "float", f"{key}.{k}")
+                                for k, v in value.items()})
         if opt.startswith("list[") and isinstance(value, list):
             inner = opt[5:-1]
             if inner == "Step":

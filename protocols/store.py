@@ -38,7 +38,7 @@ AXIS6 = ("x", "y", "z", "rx", "ry", "rz")
 
 #: nominal sample rates (Hz), used only to size chunks
 NOMINAL_RATE_HZ = {"biotac": 100.0, "biotac_pac": PAC_RATE_HZ, "arm": 500.0, "hand": 100.0,
-                   "pump": 10.0, "scale": 10.0}
+                   "pump": 10.0, "scale": 10.0, "live": 100.0}
 EVENTS_CHUNK = 256
 
 
@@ -76,10 +76,11 @@ def _time_vars(dim: str, device_name: str, host_name: str, what: str,
             Var(host_name, (dim,), "f8", "s", f"host receipt time of the {what} sample since run start"))
 
 
-def run_schema(chunk_s: float = 5.0) -> dict[str, Block]:
+def run_schema(chunk_s: float = 5.0, live: bool = False) -> dict[str, Block]:
     """The blocks of a run store, by name (``biotac``, ``biotac_pac``, ``arm``, ``hand``,
-    ``pump``, ``scale``, ``events``). ``chunk_s``: seconds of data per chunk at the nominal
-    rate. Non-leading dimensions (finger, taxel, axis6, joint) are sized at creation."""
+    ``pump``, ``scale``, ``events``, and with ``live`` the online tactile flow ``live``).
+    ``chunk_s``: seconds of data per chunk at the nominal rate. Non-leading dimensions
+    (finger, taxel, axis6, joint, live_finger, view) are sized at creation."""
     def chunk(name):
         return max(1, int(round(NOMINAL_RATE_HZ[name] * chunk_s)))
 
@@ -131,13 +132,41 @@ def run_schema(chunk_s: float = 5.0) -> dict[str, Block]:
             Var("name", ("event",), "str", "", "step, interlock, stream or device the event is about"),
             Var("detail", ("event",), "str", "", "details as JSON text"))),
     ]
+    if live:
+        blocks.append(_live_block(chunk("live")))
     return {b.name: b for b in blocks}
 
 
-def _coords(fingers: tuple[str, ...]) -> dict[str, dict[str, tuple]]:
+def _live_block(chunk: int) -> Block:
+    """The online tactile flow computed during the run (:mod:`protocols.live`), one row per
+    BioTac frame processed, so every reaction can be audited against what was seen."""
+    T, TF, TFV = ("time_live",), ("time_live", "live_finger"), ("time_live", "live_finger", "view")
+    per_view = [("flow_col", "px frame-1", "mean tactile flow along the view's columns"),
+                ("flow_row", "px frame-1", "mean tactile flow along the view's rows"),
+                ("magnitude", "px frame-1", "magnitude of the mean tactile flow"),
+                ("direction", "rad", "direction of the mean tactile flow in the view, atan2(row, col)"),
+                ("divergence", "frame-1", "mean divergence of the tactile flow"),
+                ("curl", "frame-1", "mean curl of the tactile flow"),
+                ("confidence", "1", "fraction of the footprint whose flow exceeds the noise level")]
+    return Block("live", "live", "time_live", chunk, (
+        Var("time_live", T, "f8", "s", "host receipt time of the BioTac frame since run start"),
+        Var("processed_time", T, "f8", "s", "when the frame's online flow and slip verdict were ready, since run start"),
+        Var("seq", T, "i8", "1", "BioTac frame sequence number (joins biotac/seq)"),
+        Var("processed", TF, "bool", "1", "the finger's sample was valid and processed (else skipped: NaN values)"),
+        Var("activation_total", TF, "f8", "kOhm", "sum of the 24 Kalman-filtered taxel activations (PDC proxy)"),
+        *(Var(name, TFV, "f8", units, long) for name, units, long in per_view),
+        Var("slip_fired", TF, "bool", "1", "the slip detector fired for the finger in this frame"),
+        Var("slip_cause", TF, "i1", "1", "what fired: 0 none, 1 release, 2 creep, 3 rotation (tactile.slip.CAUSES)"),
+        Var("slip_detected", T, "bool", "1", "slip detected in this frame or earlier in the current reacting step")))
+
+
+def _coords(fingers: tuple[str, ...], live) -> dict[str, dict[str, tuple]]:
     """Fixed coordinate variables by group: name -> (values, units, long_name)."""
     finger = (np.array(fingers, dtype=str), "", "finger (Shadow order)")
-    return {"biotac": {"finger": finger,
+    live_coords = {} if not live else {"live": {
+        "live_finger": (np.array(live[0], dtype=str), "", "finger processed online (Shadow order)"),
+        "view": (np.array(live[1], dtype=str), "", "tactile-frame view (tactile.frames)")}}
+    return {**live_coords, "biotac": {"finger": finger,
                        "taxel": (np.arange(1, N_TAXELS + 1, dtype=np.int16), "1", "taxel number (SynTouch)")},
             "biotac_pac": {"finger": finger},
             "arm": {"axis6": (np.array(AXIS6, dtype=str), "", "pose / twist / wrench component")},
@@ -198,18 +227,21 @@ class RunStore:
     @classmethod
     def create(cls, path, *, protocol: str, fingers=FINGERS, run_id: str | None = None,
                provenance: dict | None = None, attrs: dict | None = None,
-               chunk_s: float = 5.0) -> "RunStore":
+               chunk_s: float = 5.0, live: tuple | None = None) -> "RunStore":
         """Create ``path`` (must not exist) with every group, coordinate and empty variable,
         root attributes (``run_id``, ``protocol``, ``status="running"``, ``start_time``,
-        ``schema_version``, ``provenance``) and commit it."""
+        ``schema_version``, ``provenance``) and commit it. ``live``: ``(fingers, views)``
+        of the online tactile flow, to add the ``live`` group."""
         path = Path(path)
         if path.exists():
             raise FileExistsError(f"run store {path} already exists")
         fingers = tuple(fingers)
-        schema = run_schema(chunk_s)
+        schema = run_schema(chunk_s, live=bool(live))
         sizes = {"finger": len(fingers), "taxel": N_TAXELS, "axis6": 6, "joint": len(JOINT_NAMES)}
+        if live:
+            sizes.update(live_finger=len(live[0]), view=len(live[1]))
         root = zarr.open_group(str(path), mode="w-", zarr_format=3)
-        coords = _coords(fingers)
+        coords = _coords(fingers, live)
         for group in dict.fromkeys(b.group for b in schema.values()):
             g = root.create_group(group)
             for name, (values, units, long_name) in coords.get(group, {}).items():

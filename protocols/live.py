@@ -1,0 +1,230 @@
+"""Tactile flow computed live during a run, the slip detector on it, and the operator's view.
+
+:class:`LiveMonitor` taps the BioTac stream (:meth:`hardware.biotac.TactileSensors.tap`: the
+recorder still receives every frame), and on every engine period (:meth:`poll`, called by
+:class:`protocols.engine.RunContext` once per BioTac frame) processes the frames received
+since the last period, one at a time: the online tactile-flow pipeline
+(:class:`tactile.online.OnlineFlow`: Kalman filter, tactile frames of the configured views,
+flow against the previous frame, aggregates) and the slip detector
+(:class:`tactile.slip.SlipDetector`). Every processed frame becomes one row of the run
+store's ``live`` group, so a reaction can be audited afterwards against what the monitor
+saw, and when.
+
+The rest impedance (the zero of the activation) is the mean over the frames received during
+the engine's tare, as the offline analysis takes it from the same tare window.
+
+Configured by the ``live`` node of the run config (:class:`LiveConfig`).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field, fields, replace
+from typing import Optional
+
+import numpy as np
+
+from tactile import signals
+from tactile.flow import FlowConfig
+from tactile.online import OnlineFlow
+from tactile.pipeline import TactileConfig, TactileModel
+from tactile.slip import CAUSES, SlipConfig, SlipDetector
+
+ARROWS = "→↘↓↙←↖↑↗"          # image directions: +col is right, +row is down
+
+
+@dataclass
+class LiveConfig:
+    """The ``live`` node of the run config.
+
+    Attributes:
+        enabled: ``None`` (auto): on when a protocol step reacts to slip (``until: slip``
+            or ``on_slip``); ``true``: always (the live group is recorded); ``false``: off
+            (a protocol that reacts to slip is then refused before anything moves).
+        fingers: fingers processed online and watched for slip (default: every connected one).
+        views: tactile-frame views computed online.
+        console_hz: updates per second of the operator's live line (0: none).
+        slip: the detector's thresholds (:class:`tactile.slip.SlipConfig`).
+    """
+
+    enabled: Optional[bool] = None
+    fingers: Optional[list[str]] = None
+    views: list[str] = field(default_factory=lambda: ["bottom", "left", "right"])
+    console_hz: float = 4.0
+    slip: SlipConfig = field(default_factory=SlipConfig)
+
+
+def live_fingers(cfg: LiveConfig, connected) -> tuple[str, ...]:
+    """The fingers processed online, in Shadow order: ``cfg.fingers`` or every connected one."""
+    chosen = set(cfg.fingers or connected)
+    return tuple(f for f in connected if f in chosen)
+
+
+def live_settings(cfg) -> LiveConfig:
+    """The run config's ``live`` node as a plain :class:`LiveConfig` (defaults if absent)."""
+    from omegaconf import OmegaConf
+    node = cfg.get("live")
+    if node is None:
+        return LiveConfig()
+    values = OmegaConf.to_container(node, resolve=True) if OmegaConf.is_config(node) else dict(node)
+    unknown = sorted(set(values) - {f.name for f in fields(LiveConfig)})
+    if unknown:
+        raise ValueError(f"live.{unknown[0]}: unknown key; expected some of {[f.name for f in fields(LiveConfig)]}")
+    values["slip"] = slip_config(values.get("slip") or {})
+    return LiveConfig(**values)
+
+
+def tactile_config(analysis: dict, views) -> TactileConfig:
+    """The online pipeline's parameters: the analysis config's ``tactile`` and ``flow``
+    (so live and offline frames are the same), the live ``views``, and no smoother."""
+    tk = dict(analysis.get("tactile") or {})
+    fk = {k: v for k, v in dict(analysis.get("flow") or {}).items() if k not in ("dis", "tvl1")}
+    known = {f.name for f in fields(TactileConfig)}
+    unknown = sorted(set(tk) - known)
+    if unknown:
+        raise ValueError(f"analysis.tactile.{unknown[0]}: unknown key; expected some of {sorted(known)}")
+    tk = {k: tuple(v) if isinstance(v, (list, tuple)) else v for k, v in tk.items()}
+    return replace(TactileConfig(**tk), smooth=False, views=tuple(views), flow=FlowConfig(**fk))
+
+
+def slip_config(node) -> SlipConfig:
+    """``live.slip`` (a config node or dict) → :class:`SlipConfig` (``ValueError`` naming a bad key)."""
+    if isinstance(node, SlipConfig):
+        return node
+    values = dict(node.items()) if hasattr(node, "items") else {}
+    known = {f.name for f in fields(SlipConfig)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"live.slip.{unknown[0]}: unknown threshold; expected some of {sorted(known)}")
+    return SlipConfig(**values)
+
+
+class LiveMonitor:
+    """Online tactile flow and slip detection over one run (see the module docstring).
+
+    Args:
+        biotac: the lab's :class:`~hardware.biotac.TactileSensors`.
+        recorder: receives the ``live`` rows (:meth:`protocols.recorder.Recorder.live`).
+        model: the tactile model built with :func:`tactile_config`.
+        cfg: the :class:`LiveConfig`.
+        clock: the lab's clock (``now()``).
+        display: callable taking the live line (or ``None``).
+    """
+
+    def __init__(self, biotac, recorder, model: TactileModel, cfg: LiveConfig, clock, display=None):
+        self.cfg, self.recorder, self.model, self.clock, self.display = cfg, recorder, model, clock, display
+        self.fingers = live_fingers(cfg, biotac.fingers)
+        self.views = tuple(model.config.views)
+        self.rows = [biotac.fingers.index(f) for f in self.fingers]
+        self.biotac = biotac
+        self.tap = biotac.tap(maxlen=int(10 * biotac.rate_hz))        # 10 s: a stalled engine drops, never grows
+        self.detector = SlipDetector(len(self.fingers), slip_config(cfg.slip))
+        self.flow: OnlineFlow | None = None
+        self._rest_sum = np.zeros((len(self.fingers), 24))
+        self._rest_n = 0
+        self._next_display = -math.inf
+        self.frames = 0
+        self.still = True
+        self._step = None                               # the newest OnlineStep
+
+    # ------------------------------------------------------------------ lifecycle
+    def begin(self) -> None:
+        """End of the tare: the rest impedance is the mean over the frames seen so far."""
+        self.poll()
+        if self._rest_n == 0:
+            raise RuntimeError("live: no valid BioTac frame during the tare; cannot set the rest impedance")
+        rest = self._rest_sum / self._rest_n
+        self.flow = OnlineFlow(self.model, rest, self.fingers, self.views)
+
+    def close(self) -> dict:
+        """Stop tapping the stream; return what the monitor did, for the store's root attribute
+        ``live``: frames processed, per-finger counters of processed and skipped samples,
+        frames the tap dropped, the views, the thresholds."""
+        self.biotac.untap(self.tap)
+        out = {"fingers": list(self.fingers), "views": list(self.views), "frames": self.frames,
+               "tap_overflows": self.tap.overflows, "slip": dict(vars(self.detector.config))}
+        if self.flow is not None:
+            out["counters"] = self.flow.counters()
+        return out
+
+    # ------------------------------------------------------------------ per period
+    def poll(self, still: bool | None = None):
+        """Process every frame received since the last call; returns the detector's state."""
+        if still is not None:
+            self.still = still
+        frames = self.tap.drain()
+        if self.flow is None:                          # tare: accumulate the rest impedance
+            for fr in frames:
+                if fr.is_valid():
+                    self._rest_sum += signals.counts_to_impedance(fr.electrodes[self.rows])
+                    self._rest_n += 1
+            return None
+        if frames:
+            self.recorder.live(self._process(frames))
+        self._show()
+        return self.detector.state
+
+    def _process(self, frames) -> dict[str, np.ndarray]:
+        n, F, V = len(frames), len(self.fingers), len(self.views)
+        cols = {"time_live": np.empty(n), "processed_time": np.empty(n), "seq": np.empty(n, np.int64),
+                "processed": np.zeros((n, F), bool), "activation_total": np.empty((n, F)),
+                **{k: np.empty((n, F, V)) for k in ("flow_col", "flow_row", "magnitude", "direction",
+                                                     "divergence", "curl", "confidence")},
+                "slip_fired": np.zeros((n, F), bool), "slip_cause": np.zeros((n, F), np.int8),
+                "slip_detected": np.zeros(n, bool)}
+        t0 = self.recorder.t0
+        for i, fr in enumerate(frames):
+            t = fr.host_time - t0
+            step = self._step = self.flow.push(fr.seq, t, fr.electrodes[self.rows])
+            mean = np.stack([step.mean_col, step.mean_row], axis=-1)
+            state = self.detector.update(t, step.processed, step.activation_total, mean, step.curl,
+                                         step.confidence, still=self.still)
+            cols["time_live"][i], cols["seq"][i] = t, fr.seq
+            cols["processed_time"][i] = self.clock.now() - t0
+            cols["processed"][i], cols["activation_total"][i] = step.processed, step.activation_total
+            for k, name in (("flow_col", "mean_col"), ("flow_row", "mean_row"), ("magnitude", "magnitude"),
+                            ("direction", "direction"), ("divergence", "divergence"), ("curl", "curl"),
+                            ("confidence", "confidence")):
+                cols[k][i] = getattr(step, name)
+            cols["slip_fired"][i], cols["slip_cause"][i] = state.fired, state.cause
+            cols["slip_detected"][i] = state.detected
+            self.frames += 1
+        return cols
+
+    # ------------------------------------------------------------------ operator
+    def line(self) -> str:
+        """``ff ↓ 0.021 | mf · 0.002 | th ↓ 0.030 | slip: ff release at 20.26 s`` (px/frame, first view)."""
+        step = self._step
+        if step is None:
+            return "live: taring" if self.flow is None else "live: waiting for frames"
+        parts = []
+        for k, f in enumerate(self.fingers):
+            if not step.processed[k]:
+                parts.append(f"{f} -- skipped")
+                continue
+            mag, ang = step.magnitude[k, 0], step.direction[k, 0]
+            arrow = "·" if mag < self.model.config.noise / 2 else ARROWS[int(round(ang / (math.pi / 4))) % 8]
+            parts.append(f"{f} {arrow} {mag:.3f}")
+        first = self.detector.state.first
+        slip = "-" if first is None else f"{self.fingers[first[1]]} {CAUSES[first[2]]} at {first[0]:.2f} s"
+        return " | ".join(parts) + f" | slip: {slip}"
+
+    def _show(self) -> None:
+        if self.display is None or self.cfg.console_hz <= 0:
+            return
+        now = self.clock.now()
+        if now >= self._next_display:
+            self._next_display = now + 1.0 / self.cfg.console_hz
+            self.display(self.line())
+
+
+def terminal_display(stream=sys.stderr):
+    """A display that rewrites one terminal line in place (nothing when not a terminal)."""
+    if not stream.isatty():
+        return None
+
+    def show(line: str) -> None:
+        stream.write("\r\x1b[2K" + line)
+        stream.flush()
+    return show

@@ -1,0 +1,141 @@
+"""Slip reactions in protocols: parsing, the plan check, and the reactive pour on the simulator.
+
+The acceptance run: ``pour_grasp`` drops the bottle; ``pour_grasp_reactive`` with the same
+seed catches the slip live, tightens the grasp and stops the pump, and the bottle is held.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+from hydra import compose, initialize_config_dir
+
+from protocols.plan import make_plan
+from protocols.run import live_model, run_protocol
+from protocols.schema import register
+from protocols.steps import Criterion, ProtocolError
+
+register()
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+QUIET = ("progress=false", "analyze=false")
+
+
+def _cfg(*overrides):
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base=None):
+        return compose("config", overrides=list(overrides))
+
+
+def test_until_slip_is_a_criterion_and_reactions_parse():
+    plan = make_plan(_cfg("protocol=pour_grasp_reactive"))
+    pour = next(p.step for p in plan.steps if p.step.kind == "pour")
+    assert pour.until == Criterion(slip=True)
+    assert [r.kind for r in pour.on_slip] == ["tighten", "stop_pump", "mark"]
+    assert pour.on_slip[0].flexion == pytest.approx(0.3)
+    assert plan.slip_steps() == [pour.key]
+    # the pour waits for its volume (or the slip): 600 ml at 150 ml/min
+    assert next(p for p in plan.steps if p.step.kind == "pour").duration == pytest.approx(240.0)
+
+
+@pytest.mark.parametrize("steps, key, words", [
+    ([{"hold": {"on_slip": [{"wait": {"duration": 1}}]}}], "protocol.steps[0].hold.on_slip[0].wait",
+     "on_slip takes tighten, stop_pump, mark"),
+    ([{"hold": {"on_slip": []}}], "protocol.steps[0].hold.on_slip", "non-empty list"),
+    ([{"hold": {"until": "slips"}}], "protocol.steps[0].hold.until", "expected Criterion"),
+    ([{"hold": {"until": {"slip": "yes"}}}], "protocol.steps[0].hold.until.slip", "expected bool"),
+    ([{"hold": {"on_slip": [{"tighten": {"flexion": 2.0}}]}}], "protocol.steps[0].hold.on_slip[0].tighten.flexion",
+     "increment in (0, 0.5]"),
+    ([{"pour": {"on_slip": [{"tighten": {"fingers": ["zz"]}}]}}],
+     "protocol.steps[0].pour.on_slip[0].tighten.fingers[0]", "expected one of"),
+])
+def test_bad_reactions_name_the_yaml_key(steps, key, words):
+    cfg = _cfg()
+    cfg.protocol.steps = steps
+    with pytest.raises(ProtocolError) as err:
+        make_plan(cfg)
+    assert err.value.key == key and words in str(err.value)
+
+
+def test_a_reacting_protocol_with_the_live_monitor_off_is_refused_before_anything_moves(tmp_path):
+    cfg = _cfg("protocol=pour_grasp_reactive", "live.enabled=false", *QUIET)
+    with pytest.raises(ProtocolError, match=r"pour.*live.enabled=false"):
+        run_protocol(cfg, tmp_path / "run", console=lambda *a: None)
+    assert not (tmp_path / "run").exists()
+
+
+def test_live_monitor_is_only_built_when_needed():
+    assert live_model(_cfg("protocol=straws_sweep"), make_plan(_cfg("protocol=straws_sweep"))) is None
+    cfg = _cfg("protocol=straws_sweep", "live.enabled=true", "live.views=[bottom]")
+    assert live_model(cfg, make_plan(cfg)).config.views == ("bottom",)
+
+
+def _events(tree, kind):
+    ev = tree["events"].to_dataset()
+    return [(float(t), str(n), json.loads(str(d)) if str(d) else {})
+            for t, k, n, d in zip(ev.time.values, ev.kind.values, ev.name.values, ev.detail.values) if k == kind]
+
+
+@pytest.fixture(scope="module")
+def pours(tmp_path_factory):
+    """The same seed, with and without the reflex."""
+    out = {}
+    for name in ("pour_grasp", "pour_grasp_reactive"):
+        run_dir = tmp_path_factory.mktemp(name)
+        result = run_protocol(_cfg(f"protocol={name}", "hardware.seed=7", *QUIET), run_dir, console=lambda *a: None)
+        assert result.status == "success", result.error
+        out[name] = xr.open_datatree(result.store, engine="zarr")
+    return out
+
+
+def test_the_reactive_pour_holds_the_bottle_the_plain_pour_drops(pours):
+    plain, reactive = pours["pour_grasp"], pours["pour_grasp_reactive"]
+    assert np.isfinite(float(plain["truth/pour/full_slip"].values))            # dropped
+    assert np.isnan(float(reactive["truth/pour/full_slip"].values))            # held
+    # it neither turned nor slid down while held: only once the protocol's release opened the hand
+    released = next(t for t, n, _ in _events(reactive, "step_start") if n.endswith("release"))
+    released += float(reactive.attrs["t0_clock_s"])
+    for phase in ("rotation", "downward"):
+        t = float(reactive[f"truth/pour/{phase}"].values)
+        assert np.isnan(t) or t >= released, (phase, t, released)
+    # the slip began the same way in both runs
+    assert float(reactive["truth/pour/slip_onset"].values) == pytest.approx(
+        float(plain["truth/pour/slip_onset"].values), abs=0.05)
+
+
+def test_the_reaction_follows_the_slip_onset_within_50_ms(pours):
+    tree = pours["pour_grasp_reactive"]
+    t0 = float(tree.attrs["t0_clock_s"])
+    onset = float(tree["truth/pour/slip_onset"].values) - t0
+    (slip,) = _events(tree, "slip")
+    reactions = _events(tree, "reaction")
+    assert [n for _, n, _ in reactions] == ["tighten", "stop_pump", "mark"]
+    latency = reactions[0][0] - onset
+    assert 0 <= latency <= 0.05, latency
+    assert slip[1] in ("ff", "mf", "th") and slip[2]["cause"] in ("release", "creep", "rotation")
+    # the pump stopped within a pump period of the reaction, and no more water went in
+    pour = tree["pour"].to_dataset()
+    after = pour.time_pump.values > reactions[0][0] + 0.2
+    assert not pour.pump_running.values[after].any()
+
+
+def test_the_live_stream_records_what_the_monitor_saw(pours):
+    tree = pours["pour_grasp_reactive"]
+    live = tree["live"].to_dataset()
+    assert list(live.live_finger.values) == ["ff", "mf", "th"]
+    assert list(live.view.values) == ["bottom", "left", "right"]
+    assert live.magnitude.dims == ("time_live", "live_finger", "view")
+    # one row per BioTac frame after the tare, joined by seq
+    seqs = tree["biotac/seq"].values
+    assert np.isin(live.seq.values, seqs).all() and len(live.seq) > 0.9 * (len(seqs) - 60)
+    # the frame that fired is in the stream, before the reaction, and processed in time
+    (slip,) = _events(tree, "slip")
+    fired = live.time_live.values[live.slip_fired.values.any(axis=1)]
+    assert fired.size and fired[0] == pytest.approx(slip[2]["frame_time"], abs=1e-3)
+    assert (live.processed_time.values - live.time_live.values).max() < 0.05
+    assert tree.attrs["live"]["frames"] == len(live.seq)
+
+
+def test_the_plain_pour_records_no_live_group(pours):
+    assert "live" not in pours["pour_grasp"].children
+    assert not _events(pours["pour_grasp"], "reaction")
