@@ -9,7 +9,9 @@ from. The importer then stores a baseline from elsewhere (per finger, 24 electro
 - ``estimated``: across every file of one import, a high percentile (default 95) of each
   electrode's samples in the first ``early_s`` (default 1 s) of each file, pooled. Pressing
   the skin raises the impedance over an electrode and its count *falls*, so the upper end
-  of the early samples is the least-loaded reading the import has.
+  of the early samples is the least-loaded reading the import has. The import keeps only
+  those early frames of each file (:class:`EarlyWindow`, at most
+  :data:`.recording.CHUNK_FRAMES` frames), never the whole file.
 
 Pure functions; :class:`Baseline` is what the writer stores (``biotac/baseline`` and the
 root attributes ``baseline`` and ``calibration``).
@@ -26,9 +28,7 @@ import numpy as np
 from hardware.biotac import FINGERS
 from tactile.signals import SensorCalibration
 
-from .recording import ImportInputError, Recording
-
-
+from .recording import CHUNK_FRAMES, ImportInputError, Recording, concat, head_of
 
 @dataclass(frozen=True)
 class Baseline:
@@ -109,17 +109,64 @@ def early_frames(rec: Recording, early_s: float) -> slice:
     return slice(0, max(1, n))
 
 
+class EarlyWindow:
+    """The early frames of a file, collected chunk by chunk with bounded memory.
+
+    The frames before the first one stamped ``early_s`` s or more after the first frame
+    (device time) — for increasing times exactly what :func:`early_frames` selects — at least
+    one and at most ``max_frames`` (:attr:`capped` when that cut the window short). :meth:`add`
+    each chunk in order; :attr:`done` once the window is complete; :meth:`recording` is the
+    window (every finger of the chunks; ``meta["early_window_capped_at_frames"]`` if capped).
+    """
+
+    def __init__(self, early_s: float, max_frames: int = CHUNK_FRAMES):
+        self.early_s = early_s
+        self.max_frames = max_frames
+        self.parts: list[Recording] = []
+        self.frames = 0
+        self.done = False
+        self.capped = False
+        self._limit: float | None = None
+
+    def add(self, chunk: Recording) -> None:
+        """Keep the part of ``chunk`` (the next frames of the file) inside the window."""
+        if self.done or not chunk.n_frames:
+            return
+        t = chunk.device_time
+        if self._limit is None:
+            self._limit = float(t[0]) + self.early_s
+        beyond = np.flatnonzero(t >= self._limit)
+        n = int(beyond[0]) if beyond.size else chunk.n_frames
+        if not self.frames:
+            n = max(1, n)
+        n = min(n, self.max_frames - self.frames)
+        if n:
+            self.parts.append(head_of(chunk, n))
+            self.frames += n
+        self.capped = not beyond.size and self.frames >= self.max_frames
+        self.done = bool(beyond.size) or self.capped
+
+    def recording(self) -> Recording:
+        """The window as one :class:`Recording` (needs at least one frame added)."""
+        rec = concat(self.parts)
+        if self.capped:
+            rec.meta["early_window_capped_at_frames"] = self.max_frames
+        return rec
+
+
 def estimate_baseline(recordings, early_s: float = 1.0, percentile: float = 95.0,
                       names=None) -> Baseline:
     """Per finger and taxel, the ``percentile`` of the electrode counts in the first ``early_s``
     s of every recording that has the finger, pooled.
 
     Args:
-        recordings: the :class:`Recording` s of one import (unconnected fingers already dropped).
+        recordings: the :class:`Recording` s of one import, or their early windows
+            (:class:`EarlyWindow`); unconnected fingers already dropped.
         early_s: s from each recording's start.
         percentile: 0..100; high, because counts fall under load.
         names: a label per recording (file names) for the record.
-    Returns a :class:`Baseline` with ``method="estimated"``.
+    Returns a :class:`Baseline` with ``method="estimated"``; its details name the files whose
+    early window was cut at :data:`.recording.CHUNK_FRAMES` frames (``early_window_capped``).
     """
     if not 0 < percentile <= 100:
         raise ImportInputError(f"estimate.percentile={percentile}: expected in (0, 100]")
@@ -142,10 +189,13 @@ def estimate_baseline(recordings, early_s: float = 1.0, percentile: float = 95.0
                                    f"(min {counts.min():g}); the early samples are not a sensor at rest")
         cals[f] = SensorCalibration(counts, sensor_id=f"{f} (estimated)",
                                     source=f"p{percentile:g} of the first {early_s:g} s of {len(names)} file(s)")
+    details = {"percentile": percentile, "early_s": early_s, "files": [str(n) for n in names],
+               "frames_per_finger": frames}
+    capped = {str(n): r.meta["early_window_capped_at_frames"] for n, r in zip(names, recordings)
+              if r.meta.get("early_window_capped_at_frames")}
+    if capped:
+        details["early_window_capped"] = {"frames": capped, "why": "the early window holds at most this many "
+                                                                  "frames per file (bounded memory)"}
     return Baseline("estimated", cals,
                     f"estimated: percentile {percentile:g} of each electrode over the first {early_s:g} s "
-                    f"of {len(names)} file(s) of this import",
-                    {"percentile": percentile, "early_s": early_s, "files": [str(n) for n in names],
-                     "frames_per_finger": frames})
-
-
+                    f"of {len(names)} file(s) of this import", details)

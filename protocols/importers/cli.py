@@ -4,8 +4,11 @@
     tactile-import source=csvs/ rate_hz=100 baseline=estimate out=imported/s3
     tactile-import source=press.csv calibration=cal.json fingers=[mf]
 
-Exit status: 0 imported, 2 bad input (one line on stderr; nothing written), 1 other failure.
-``verbose=true`` adds the traceback. The work is :func:`protocols.importers.import_source`.
+Exit status: 0 imported, 2 bad input (one line on stderr naming the file and, for a CSV, the
+line and column; nothing written), 1 other failure. A truncated bag imports what it holds
+(exit 0) and its output line ends with ``WARNING: truncated bag: ...``. Files are streamed:
+memory does not grow with their length (``docs/import.md``). ``verbose=true`` adds the
+traceback. The work is :func:`protocols.importers.import_source`.
 """
 
 from __future__ import annotations

@@ -1,24 +1,32 @@
 """Import a source (a bag, a CSV, or a directory of them) into run stores: :func:`import_source`.
 
-Order of work, so that bad input never leaves anything behind: discover the files, read and
-check every one (fingers, rate, columns), choose the baseline, check no target exists, then
-write each run into a hidden staging directory beside its target and rename them all into
-place at the end. Any error before the renames removes every staging directory.
+Every file is read twice, chunk by chunk, so memory does not grow with its length: a first
+pass (:func:`scan`) checks every frame and collects what the import must decide before
+writing (connected fingers, the early window of a baseline estimate, the clock model); the
+second pass (:func:`.writer.write_store`) writes the frames as they come.
+
+Order of work, so that bad input never leaves anything behind: check the options, discover
+the files, check no target exists, scan every file, choose the fingers and the baseline,
+then write each run into a hidden staging directory beside its target (the rate check,
+which needs the exact median interval, is made on the stored times) and rename them all
+into place at the end. Any error before the renames removes every staging directory.
 """
 
 from __future__ import annotations
 
 import importlib.metadata
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from protocols.clockmodel import OnlineClockModel
 from protocols.provenance import collect
 
-from .bag import TOPIC, read_bag
-from .baseline import Baseline, estimate_baseline, load_calibration
-from .csv import read_csv
-from .recording import ImportInputError, Recording, check_rate, select_fingers
+from .bag import TOPIC, BagFile
+from .baseline import Baseline, EarlyWindow, estimate_baseline, load_calibration
+from .csv import CsvFile
+from .recording import (CHUNK_FRAMES, Connectivity, ImportInputError, Prepared, Reader, Recording, Scan,
+                        decide_fingers, keep_fingers, parse_rate)
 from .sources import Source, checksum, discover, sha256_file
 from .writer import discard, publish, staging_dir, write_run
 
@@ -36,6 +44,8 @@ class ImportSettings:
         fingers: fingers to keep (default: every connected one); for an unprefixed CSV, its one finger.
         topic: the bags' BioTac topic.
         estimate_early_s, estimate_percentile: see :func:`.baseline.estimate_baseline`.
+        chunk_frames: frames read and written at a time (the memory bound; also the most
+            frames of one file's early window).
     """
 
     rate_hz: float | None = None
@@ -45,11 +55,15 @@ class ImportSettings:
     topic: str = TOPIC
     estimate_early_s: float = 1.0
     estimate_percentile: float = 95.0
+    chunk_frames: int = CHUNK_FRAMES
 
 
 @dataclass
 class ImportResult:
-    """One run store written: where, from what, and what was decided."""
+    """One run store written: where, from what, and what was decided.
+
+    ``warnings``: what the researcher must know about the data (a truncated bag), one
+    sentence each; also in the store's ``import.reader`` attribute."""
 
     source: str
     sha256: str
@@ -60,21 +74,64 @@ class ImportResult:
     frames: int
     rate_hz: float
     baseline: str
+    warnings: list[str] = field(default_factory=list)
 
 
-def read_source(src: Source, settings: ImportSettings) -> Recording:
-    """Read one source with the reader of its kind."""
+def open_source(src: Source, settings: ImportSettings) -> Reader:
+    """The chunk reader of one source (:class:`.bag.BagFile` or :class:`.csv.CsvFile`)."""
     if src.kind == "bag":
-        rec = read_bag(src.path, settings.topic)
-        check_rate(rec.nominal_rate_hz(), settings.rate_hz, f"{src.path}: header stamps of {settings.topic}")
-        return rec
+        return BagFile(src.path, settings.topic, settings.rate_hz)
     # an unprefixed (one-sensor) file is the finger named by fingers=[x], else ff
     finger = settings.fingers[0] if settings.fingers and len(settings.fingers) == 1 else "ff"
-    return read_csv(src.path, settings.rate_hz, finger)
+    return CsvFile(src.path, settings.rate_hz, finger)
+
+
+def scan(reader: Reader, early_s: float = 1.0, frames: int = CHUNK_FRAMES) -> Scan:
+    """The first pass over a file: read (and so check) every frame, chunk by chunk, keeping
+    only the frame count, the unconnected-finger test (:class:`.recording.Connectivity`),
+    the early window (:class:`.baseline.EarlyWindow`, ``early_s`` s) and the clock model of
+    device against host time (:class:`protocols.clockmodel.OnlineClockModel`, one point per
+    1 s window). Memory: one chunk of ``frames`` frames (plus the early window, at most as
+    much), and one clock-model point (~0.2 kB) per second recorded."""
+    conn, early, clock = None, EarlyWindow(early_s, frames), OnlineClockModel(window_s=1.0)
+    n, first, channels = 0, None, ()
+    for chunk in reader.chunks(frames):
+        if conn is None:
+            conn, first, channels = Connectivity(chunk.fingers), float(chunk.device_time[0]), chunk.channels
+        conn.update(chunk)
+        early.add(chunk)
+        if chunk.host_time is not None:
+            clock.update(chunk.device_time, chunk.host_time)
+        n += chunk.n_frames
+    fit = clock.final()
+    return Scan(frames=n, fingers=tuple(conn.fingers), channels=channels, unconnected=conn.unconnected(),
+                head=early.recording(), clock=fit, t0=float(fit(first)) if fit is not None else first)
+
+
+def check_settings(settings: ImportSettings) -> None:
+    """Refuse bad options before any file is read (:class:`ImportInputError`, one sentence)."""
+    frames = settings.chunk_frames
+    if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
+        raise ImportInputError(f"chunk_frames={frames!r}: expected a positive whole number of frames")
+    if settings.baseline not in BASELINES:
+        raise ImportInputError(f"baseline={settings.baseline!r}: expected one of {', '.join(BASELINES)}")
+    parse_rate(settings.rate_hz)
+
+
+def prepare(src: Source, settings: ImportSettings) -> Prepared:
+    """Open and scan one source (the first pass) and decide its fingers (see
+    :func:`.recording.decide_fingers`)."""
+    reader = open_source(src, settings)
+    found = scan(reader, settings.estimate_early_s, settings.chunk_frames)
+    where = str(reader.meta.get("path", src.path))
+    decision = decide_fingers(found.fingers, found.unconnected, settings.fingers, where)
+    kept = tuple(f for f in found.fingers if f in decision["kept"])
+    return Prepared(reader, found, kept, decision, settings.chunk_frames)
 
 
 def choose_baseline(settings: ImportSettings, recs: list[Recording], names: list[str]) -> Baseline | None:
-    """The baseline of the whole import (or ``None``): see :class:`ImportSettings`."""
+    """The baseline of the whole import (or ``None``): see :class:`ImportSettings`. ``recs``:
+    the files' early windows (or whole recordings), kept fingers only."""
     mode = settings.baseline
     if mode not in BASELINES:
         raise ImportInputError(f"baseline={mode!r}: expected one of {', '.join(BASELINES)}")
@@ -104,35 +161,32 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
     written) for bad input, ``FileExistsError`` when a run directory already exists.
     """
     settings = settings or ImportSettings()
+    check_settings(settings)
     out = Path(out)
     sources = discover(source)
-    recs, decisions = [], []
-    for src in sources:
-        rec, decision = select_fingers(read_source(src, settings), settings.fingers)
-        recs.append(rec)
-        decisions.append(decision)
-    baseline = choose_baseline(settings, recs, [str(s.path) for s in sources])
-    if baseline is not None:
-        for src, rec in zip(sources, recs):
-            baseline.counts(rec.fingers, where=str(src.path))           # every finger covered
     targets = [out / s.name for s in sources]
-    existing = [str(t) for t in targets if t.exists()]
-    if existing:
-        raise FileExistsError(f"out={out}: {', '.join(existing)} already exist(s); choose another out= "
-                              f"or remove {'it' if len(existing) == 1 else 'them'}")
+    _check_targets(out, targets)                                        # before reading anything long
+    prepared = [prepare(src, settings) for src in sources]              # first pass: read and check all
+    heads = [keep_fingers(p.scan.head, p.fingers) for p in prepared]
+    baseline = choose_baseline(settings, heads, [str(s.path) for s in sources])
+    if baseline is not None:
+        for src, p in zip(sources, prepared):
+            baseline.counts(p.fingers, where=str(src.path))             # every finger covered
+    _check_targets(out, targets)
     config_yaml = config_yaml if config_yaml is not None else json.dumps(
         {"source": str(source), "out": str(out), **asdict(settings)}, indent=1)
     missing_dirs = [d for d in (out, *out.parents) if not d.exists()]      # created by staging; removed on error
     staged, results = [], []
     try:
-        for src, rec, decision, target in zip(sources, recs, decisions, targets):
+        for src, p, target in zip(sources, prepared, targets):
             staging = staging_dir(target)
             staged.append(staging)
-            import_attrs, prov = run_metadata(src, rec, decision, baseline, config_yaml, overrides, len(sources))
-            write_run(rec, staging, prov, import_attrs, baseline)
+            import_attrs, prov = run_metadata(src, p, baseline, config_yaml, overrides, len(sources))
+            summary = write_run(p, staging, prov, import_attrs, baseline)    # second pass
             results.append(ImportResult(str(src.path), import_attrs["sha256"], str(target),
-                                        str(target / "run.zarr"), list(rec.fingers), decision["dropped"],
-                                        rec.n_frames, rec.nominal_rate_hz(), baseline.method if baseline else "none"))
+                                        str(target / "run.zarr"), list(p.fingers), p.decision["dropped"],
+                                        p.scan.frames, summary["rate_hz"], baseline.method if baseline else "none",
+                                        reader_warnings(p.reader.meta)))
         publish(list(zip(staged, targets)))
     except BaseException:
         discard(staged)
@@ -146,30 +200,49 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
         for r in results:
             dropped = f", dropped {', '.join(f'{f} ({why})' for f, why in r.dropped.items())}" if r.dropped else ""
             console(f"imported {r.source} -> {r.store}: {r.frames} frames at {r.rate_hz:.4g} Hz, "
-                    f"fingers {', '.join(r.fingers)}{dropped}; baseline: {r.baseline}")
+                    f"fingers {', '.join(r.fingers)}{dropped}; baseline: {r.baseline}"
+                    + "".join(f"; WARNING: {w}" for w in r.warnings))
     return results
 
 
-def run_metadata(src: Source, rec: Recording, decision: dict, baseline: Baseline | None, config_yaml: str,
+def _check_targets(out: Path, targets: list[Path]) -> None:
+    existing = [str(t) for t in targets if t.exists()]
+    if existing:
+        raise FileExistsError(f"out={out}: {', '.join(existing)} already exist(s); choose another out= "
+                              f"or remove {'it' if len(existing) == 1 else 'them'}")
+
+
+def reader_warnings(meta: dict) -> list[str]:
+    """Sentences for what a reader noted about a damaged file (``meta["truncated"]``)."""
+    t = meta.get("truncated")
+    if not t:
+        return []
+    return [f"truncated bag: the file ({t['file_bytes']} bytes) ends {t['ends']}; imported the "
+            f"{t['messages_read']} complete messages before that; lost: {t['messages_lost']}"]
+
+
+def run_metadata(src: Source, prepared: Prepared, baseline: Baseline | None, config_yaml: str,
                  overrides, n_sources: int) -> tuple[dict, dict]:
     """The root attribute ``import`` and the provenance of one imported file.
 
     ``import``: source path, ``sha256``, bytes and files, ``importer``, what the reader found,
-    the finger decision, frames, rate (Hz), channels. Provenance: :func:`protocols.provenance.collect`
-    plus ``source`` (path, sha256, bytes, files, format) and ``importer``.
+    the finger decision, frames, rate (Hz; ``None`` here, set by the writer from the stored
+    times), channels. Provenance: :func:`protocols.provenance.collect` plus ``source`` (path,
+    sha256, bytes, files, format) and ``importer``.
     """
     summ = checksum(src)
     importer = _importer(src)
+    meta, fingers = prepared.reader.meta, prepared.fingers
     import_attrs = {"source": str(src.path.resolve()), "source_name": src.path.name, "sha256": summ["sha256"],
                     "source_bytes": summ["bytes"], "source_files": summ["files"], "importer": importer,
-                    "reader": rec.meta, "fingers": decision, "frames": rec.n_frames,
-                    "rate_hz": rec.nominal_rate_hz(), "channels": list(rec.channels), "files_in_import": n_sources}
+                    "reader": meta, "fingers": prepared.decision, "frames": prepared.scan.frames,
+                    "rate_hz": None, "channels": list(prepared.scan.channels), "files_in_import": n_sources}
     identity = {"biotac": {"model": "SynTouch BioTac SP (imported)", "serial_or_address": src.path.name,
                            "firmware": "unknown"}}
     prov = collect(config_yaml, list(overrides), identity,
-                   baseline.calibration_attrs(rec.fingers) if baseline else {}, None, protocol="import")
+                   baseline.calibration_attrs(fingers) if baseline else {}, None, protocol="import")
     prov["source"] = {"path": str(src.path.resolve()), "sha256": summ["sha256"], "bytes": summ["bytes"],
-                      "files": summ["files"], "format": rec.meta.get("format")}
+                      "files": summ["files"], "format": meta.get("format")}
     prov["importer"] = importer
     return import_attrs, prov
 

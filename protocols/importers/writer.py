@@ -1,7 +1,7 @@
-"""Write a :class:`~.recording.Recording` as a run store (``run.zarr`` + ``run.json``), atomically.
+"""Write a file's :class:`~.recording.Recording` chunks as a run store (``run.zarr`` + ``run.json``), atomically.
 
 The store has the layout of a recorded run (``docs/run_store.md``), written through
-:class:`protocols.store.RunStore` with the recorder's column helpers, so ``tactile-analyze``
+:class:`protocols.store.RunStore` with the recorder's column layout, so ``tactile-analyze``
 reads it like any run:
 
 - ``biotac``: ``time`` (s since the first frame, from the clock model of ``device_time``
@@ -15,6 +15,14 @@ reads it like any run:
 - root attributes: ``protocol="import"``, ``labels=[]``, ``status="success"``, ``import``
   (source, checksum, importer, finger decision), ``baseline``, ``calibration``, ``streams``.
 
+Streaming (:func:`write_store`): the file is read again chunk by chunk (the second pass; the
+first, :func:`.importer.scan`, fitted the clock model and chose the fingers) and each chunk is
+appended as it comes, so memory is one chunk whatever the file's length. What needs every
+frame is computed without holding them: the frame rate (the exact median interval,
+:func:`.recording.median_of`, read back from the stored ``device_time`` four chunks at a time), the
+residual latency of the clock model (over every ⌊N / 100 000⌋-th frame, as the recorder
+does: every frame below 200 000 frames).
+
 Nothing half-written: everything goes to a hidden temporary directory beside the target,
 renamed into place by :func:`publish` once every store of the import is complete.
 """
@@ -22,7 +30,6 @@ renamed into place by :func:`publish` once every store of the import is complete
 from __future__ import annotations
 
 import json
-import math
 import os
 import shutil
 import tempfile
@@ -32,120 +39,196 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from hardware.biotac import BiotacFrame
-from protocols.clockmodel import fit_envelope, latency_stats, sequence_gaps, window_minima
+from hardware.biotac import COUNTS_MAX, PAC_RATE_HZ
+from protocols.clockmodel import ClockFit, latency_stats, sequence_gaps
 from protocols.provenance import write_run_json
-from protocols.recorder import biotac_columns, pac_columns
 from protocols.store import RunStore, jsonable
 
 from .baseline import Baseline
-from .recording import Recording
+from .recording import ImportInputError, Prepared, Recording, diffs, median_of, rate_of
 
 PROTOCOL = "import"
 OPTIONAL = ("pdc", "tdc", "tac")
+#: frames of the residual-latency sample: every max(1, N // LATENCY_SAMPLE)-th frame
+LATENCY_SAMPLE = 100_000
+#: rows of a stored time array read at once when computing the median interval, in chunks
+READ_CHUNKS = 4
 
 
-def frames_of(rec: Recording) -> list[BiotacFrame]:
-    """The recording as :class:`hardware.biotac.BiotacFrame` s (absent channels as zeros,
-    ``host_time`` NaN when unknown), so the recorder's column helpers apply unchanged."""
+def time_base(clock: ClockFit | None, t0: float):
+    """``to_run_time(d)``: device time (s, any shape) to seconds since the first frame — the
+    clock model ``clock`` minus ``t0`` (its value at the first frame), or ``d − t0`` without
+    host times (``clock`` ``None``, ``t0`` the first device time)."""
+    if clock is None:
+        return lambda x: np.asarray(x, float) - t0
+    return lambda x: clock(x) - t0
+
+
+_I16 = np.iinfo(np.int16)
+
+
+def _i16(a) -> np.ndarray:
+    """Counts as int16, values beyond int16 clipped (as the recorder stores them; only frames
+    flagged ``valid = False`` have any)."""
+    return np.clip(np.asarray(a), _I16.min, _I16.max).astype(np.int16)
+
+
+def _in_range(a: np.ndarray, axes) -> np.ndarray:
+    return np.all((a >= 0) & (a <= COUNTS_MAX), axis=axes)
+
+
+def biotac_block(rec: Recording, to_run, host_t0: float) -> dict:
+    """``biotac`` columns of a chunk (N frames, F fingers): ``time`` (s since run start),
+    ``device_time`` (s), ``host_time`` (s since run start; NaN without host times), ``seq``,
+    ``valid`` (every channel, PAC included, in 0..4095, as ``BiotacFrame.is_valid``), int16
+    ``electrodes`` (N, F, 24) and ``pdc``, ``tdc``, ``tac`` (N, F; zeros when absent)."""
     n, F = rec.n_frames, len(rec.fingers)
     zeros = np.zeros((n, F), np.int64)
-    host = rec.host_time if rec.host_time is not None else np.full(n, math.nan)
-    pac = rec.pac if rec.pac is not None else [np.zeros((F, 0), np.int64)] * n
-    return [BiotacFrame(int(rec.seq[i]), float(rec.device_time[i]), float(host[i]), rec.electrodes[i],
-                        (rec.pdc if rec.pdc is not None else zeros)[i], (rec.tdc if rec.tdc is not None else zeros)[i],
-                        (rec.tac if rec.tac is not None else zeros)[i], pac[i])
-            for i in range(n)]
+    chan = {c: getattr(rec, c) if getattr(rec, c) is not None else zeros for c in OPTIONAL}
+    valid = _in_range(rec.electrodes, (1, 2))
+    for c in OPTIONAL:
+        valid &= _in_range(chan[c], 1)
+    if rec.pac is not None:
+        valid &= np.array([bool(np.all((p >= 0) & (p <= COUNTS_MAX))) for p in rec.pac], bool)
+    device = np.asarray(rec.device_time, float)
+    host = np.full(n, np.nan) if rec.host_time is None else np.asarray(rec.host_time, float)
+    return {"time": to_run(device), "device_time": device, "host_time": host - host_t0,
+            "seq": np.asarray(rec.seq, np.int64), "valid": valid, "electrodes": _i16(rec.electrodes),
+            "pdc": _i16(chan["pdc"]), "tdc": _i16(chan["tdc"]), "tac": _i16(chan["tac"])}
 
 
-def time_base(device_time: np.ndarray, host_time: np.ndarray | None, window_s: float = 1.0):
-    """Map device time (s) to seconds since the first frame.
-
-    With host receipt times: the clock model of :mod:`protocols.clockmodel` (lower envelope
-    of ``host − device`` per ``window_s`` window), origin at the first frame's fitted time.
-    Without: ``device − device[0]``. Returns ``(to_run_time, t0, model)`` where
-    ``to_run_time(d)`` maps (N,) device s to run s, ``t0`` is the origin on the host clock
-    (device clock without host times) and ``model`` is the JSON-ready clock-model summary
-    (``None`` without host times).
-    """
-    d = np.asarray(device_time, float)
-    if host_time is None:
-        t0 = float(d[0])
-        return (lambda x: np.asarray(x, float) - t0), t0, None
-    h = np.asarray(host_time, float)
-    _, dm, hm = window_minima(d, h, window_s, float(d[0]))
-    fit = fit_envelope(dm, hm)
-    t0 = float(fit(d[0]))
-    model = {"offset_s": fit.offset_s, "drift_ppm": fit.drift * 1e6, "windows": fit.n_windows,
-             "windows_used": fit.n_used, "min_latency_s": 0.0, "residual_latency": latency_stats(fit, d, h)}
-    return (lambda x: fit(x) - t0), t0, model
+def pac_block(rec: Recording, to_run, host_t0: float, rate_hz: float = PAC_RATE_HZ) -> dict:
+    """``biotac_pac`` columns of a chunk with PAC: (M, F) int16 ``pac`` and (M,) ``time_pac``,
+    ``device_time``, ``host_time`` (s). A frame's n samples end at its timestamp, 1/rate apart:
+    sample k (0..n−1) at ``device_time − (n−1−k)/rate``, as :func:`protocols.recorder.pac_columns`."""
+    counts = np.array([p.shape[1] for p in rec.pac], np.int64)                  # (N,)
+    pac = np.concatenate([p.T for p in rec.pac]) if len(rec.pac) else np.zeros((0, len(rec.fingers)))
+    start = np.repeat(np.cumsum(counts) - counts, counts)
+    back = np.repeat(counts, counts) - 1 - (np.arange(int(counts.sum())) - start)
+    device = np.repeat(np.asarray(rec.device_time, float), counts) - back / rate_hz
+    host = (np.repeat(np.asarray(rec.host_time, float), counts) if rec.host_time is not None
+            else np.full(len(back), np.nan))
+    return {"time_pac": to_run(device) if len(device) else np.zeros(0), "device_time": device,
+            "host_time": host - host_t0, "pac": _i16(pac)}
 
 
-def store_columns(rec: Recording) -> tuple[dict, dict, dict]:
-    """The ``biotac`` and ``biotac_pac`` block columns of ``rec`` (times in s since run start)
-    and a stream summary (samples, gaps, missing, invalid, clock model, t0)."""
-    frames = frames_of(rec)
-    to_run, t0, model = time_base(rec.device_time, rec.host_time)
-    bio = biotac_columns(frames)
-    bio["time"] = to_run(bio["device_time"])
-    bio["host_time"] = bio["host_time"] - (t0 if rec.host_time is not None else 0.0)
-    pac = pac_columns(frames)
-    pac["time_pac"] = to_run(pac["device_time"]) if len(pac["device_time"]) else np.zeros(0)
-    pac["host_time"] = pac["host_time"] - (t0 if rec.host_time is not None else 0.0)
-    gaps = sequence_gaps(rec.seq)
-    summary = {"samples": rec.n_frames, "gaps": sum(m > 0 for _, _, m in gaps),
-               "missing": int(sum(m for _, _, m in gaps if m > 0)), "invalid": int((~bio["valid"]).sum()),
-               "faults": 0, "clock_model": model, "t0": t0,
-               "t0_clock": "host (bag record time)" if rec.host_time is not None else "device (file time)"}
-    return bio, pac, summary
-
-
-def event_columns(rec: Recording, time: np.ndarray, detail: dict) -> dict:
-    """``events`` block: ``info``/``import`` at 0 s, then one ``gap`` per sequence jump
-    (``detail``: after_seq, next_seq, missing, gap_s), as the recorder writes them."""
-    rows = [(0.0, "info", "import", detail)]
-    for i, before, missing in sequence_gaps(rec.seq):
-        rows.append((float(time[i]), "gap", "biotac",
-                     {"after_seq": before, "next_seq": int(rec.seq[i]), "missing": missing,
-                      "gap_s": float(time[i] - time[i - 1]) if i else None}))
+def event_block(rows: list[tuple]) -> dict:
+    """``events`` columns of ``(time s, kind, name, detail dict)`` rows (detail as JSON text)."""
     return {"time": np.array([r[0] for r in rows], float),
             "kind": np.array([r[1] for r in rows], dtype=object),
             "name": np.array([r[2] for r in rows], dtype=object),
             "detail": np.array([json.dumps(jsonable(r[3])) for r in rows], dtype=object)}
 
 
-def write_store(rec: Recording, store_path: Path, provenance: dict, import_attrs: dict,
+def gap_events(seq: np.ndarray, time: np.ndarray, last_seq: int | None, last_time: float | None) -> list[tuple]:
+    """One ``gap`` event per sequence jump in a chunk (``seq``, ``time`` (N,) s since run
+    start), following frame ``last_seq`` at ``last_time`` (``None`` for the first chunk)."""
+    rows = []
+    for i, before, missing in sequence_gaps(seq, last_seq):
+        prev = time[i - 1] if i else last_time
+        rows.append((float(time[i]), "gap", "biotac",
+                     {"after_seq": before, "next_seq": int(seq[i]), "missing": missing,
+                      "gap_s": float(time[i] - prev) if prev is not None else None}))
+    return rows
+
+
+def stored_rate(store_path: Path, n: int, rows: int) -> float:
+    """Frame rate (Hz) from the median interval of the ``n`` stored ``biotac/device_time``
+    values, exact, reading them back ``rows`` at a time; NaN for fewer than 2."""
+    if n < 2:
+        return float("nan")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        arr = zarr.open_group(str(store_path), mode="r", use_consolidated=False)["biotac"]["device_time"]
+
+    def intervals():
+        return diffs(arr[i:min(n, i + rows)] for i in range(0, n, rows))
+    return rate_of(median_of(intervals, n - 1))
+
+
+def write_store(prepared: Prepared, store_path: Path, provenance: dict, import_attrs: dict,
                 baseline: Baseline | None = None) -> dict:
-    """Create the run store ``store_path`` (must not exist) holding ``rec``; status ``success``.
+    """Create the run store ``store_path`` (must not exist) holding the file, streamed; status ``success``.
 
     Args:
-        rec: the recording, unconnected fingers already dropped.
+        prepared: the file after the first pass (reader, scan, fingers kept).
         provenance: :func:`protocols.provenance.collect` output (plus ``source``, ``importer``).
-        import_attrs: the root attribute ``import`` (source, checksum, finger decision...).
+        import_attrs: the root attribute ``import`` (source, checksum, finger decision...);
+            its ``rate_hz`` is set here, from the stored times.
         baseline: an unloaded baseline from elsewhere, or ``None``.
-    Returns the stream summary (see :func:`store_columns`).
+    Returns the stream summary (samples, gaps, missing, invalid, faults, clock model,
+    t0_clock) plus ``t0`` and ``rate_hz``. Raises :class:`ImportInputError` when the rate
+    disagrees with a given one or the file changed since the first pass.
     """
-    bio, pac, summary = store_columns(rec)
-    baseline_attrs = baseline.to_attrs(rec.fingers) if baseline else {
+    scan, fingers = prepared.scan, prepared.fingers
+    has_host = scan.clock is not None
+    to_run = time_base(scan.clock, scan.t0)
+    host_t0 = scan.t0 if has_host else 0.0
+    baseline_attrs = baseline.to_attrs(fingers) if baseline else {
         "method": "none", "source": "none stored: the analysis takes its rest stretch from the record"}
     attrs = {"labels": [], "import": import_attrs, "baseline": baseline_attrs,
-             "calibration": baseline.calibration_attrs(rec.fingers) if baseline else {},
-             "streams_recorded": ["biotac"], "t0_clock_s": summary["t0"],
-             "recording_start_time": _iso(summary["t0"]) if rec.host_time is not None else None}
-    store = RunStore.create(store_path, protocol=PROTOCOL, fingers=rec.fingers, provenance=provenance, attrs=attrs)
+             "calibration": baseline.calibration_attrs(fingers) if baseline else {},
+             "streams_recorded": ["biotac"], "t0_clock_s": scan.t0,
+             "recording_start_time": _iso(scan.t0) if has_host else None}
+    store = RunStore.create(store_path, protocol=PROTOCOL, fingers=fingers, provenance=provenance, attrs=attrs)
     try:
-        store.append_many({"biotac": bio, "biotac_pac": pac,
-                           "events": event_columns(rec, bio["time"], {"source": import_attrs.get("source"),
-                                                                      "fingers": import_attrs.get("fingers")})})
-        stream = {k: v for k, v in summary.items() if k != "t0"}
-        store.set_group_attrs("biotac", stream=stream, source_channels=list(rec.channels))
+        counters = _append_chunks(store, prepared, to_run, host_t0,
+                                  {"source": import_attrs.get("source"), "fingers": import_attrs.get("fingers")})
+        if counters["samples"] != scan.frames:
+            raise ImportInputError(f"{prepared.reader.path}: changed while being imported ({scan.frames} frames "
+                                   f"on the first read, {counters['samples']} on the second)")
+        rate = stored_rate(store_path, scan.frames, READ_CHUNKS * prepared.chunk_frames)
+        prepared.reader.finish(rate)
+        import_attrs["rate_hz"] = rate
+        model = None
+        if has_host:
+            d, h = counters.pop("latency_sample")
+            model = {"offset_s": scan.clock.offset_s, "drift_ppm": scan.clock.drift * 1e6,
+                     "windows": scan.clock.n_windows, "windows_used": scan.clock.n_used, "min_latency_s": 0.0,
+                     "residual_latency": latency_stats(scan.clock, d, h)}
+        counters.pop("latency_sample", None)
+        stream = {**counters, "faults": 0, "clock_model": model,
+                  "t0_clock": "host (bag record time)" if has_host else "device (file time)"}
+        store.set_attrs(**{"import": import_attrs})
+        store.set_group_attrs("biotac", stream=stream, source_channels=list(scan.channels))
         store.close("success", streams={"biotac": stream})
     finally:
         if not store.closed:
             store.close("failed")
-    absent = [c for c in OPTIONAL if getattr(rec, c) is None]
-    _finish_biotac_group(store_path, absent, baseline.counts(rec.fingers) if baseline else None, baseline_attrs)
-    return summary
+    absent = [c for c in OPTIONAL if c not in scan.channels]
+    _finish_biotac_group(store_path, absent, baseline.counts(fingers) if baseline else None, baseline_attrs)
+    return {**stream, "t0": scan.t0, "rate_hz": rate}
+
+
+def _append_chunks(store: RunStore, prepared: Prepared, to_run, host_t0: float, import_detail: dict) -> dict:
+    """Append every chunk (the second pass) with its gap events after the ``import`` event;
+    returns the counters (samples, gaps, missing, invalid) and the residual-latency sample
+    (device s, host s) of every ``max(1, N // LATENCY_SAMPLE)``-th frame."""
+    step = max(1, prepared.scan.frames // LATENCY_SAMPLE)
+    samples = gaps = missing = invalid = 0
+    last_seq = last_time = None
+    sample_d, sample_h = [], []
+    store.append("events", event_block([(0.0, "info", "import", import_detail)]))
+    for chunk in prepared.chunks():
+        bio = biotac_block(chunk, to_run, host_t0)
+        blocks = {"biotac": bio}
+        if chunk.pac is not None:
+            blocks["biotac_pac"] = pac_block(chunk, to_run, host_t0)
+        events = gap_events(bio["seq"], bio["time"], last_seq, last_time)
+        if events:
+            blocks["events"] = event_block(events)
+        store.append_many(blocks)
+        gaps += sum(e[3]["missing"] > 0 for e in events)
+        missing += sum(e[3]["missing"] for e in events if e[3]["missing"] > 0)
+        invalid += int((~bio["valid"]).sum())
+        if chunk.host_time is not None:
+            first = (-samples) % step
+            sample_d.append(bio["device_time"][first::step])
+            sample_h.append(np.asarray(chunk.host_time, float)[first::step])
+        samples += chunk.n_frames
+        last_seq, last_time = int(bio["seq"][-1]), float(bio["time"][-1])
+    latency = (np.concatenate(sample_d), np.concatenate(sample_h)) if sample_d else None
+    return {"samples": samples, "gaps": gaps, "missing": missing, "invalid": invalid, "latency_sample": latency}
 
 
 def _finish_biotac_group(store_path: Path, absent: list[str], baseline: np.ndarray | None, attrs: dict) -> None:
@@ -188,12 +271,13 @@ def staging_dir(target: Path) -> Path:
     return path
 
 
-def write_run(rec: Recording, staging: Path, provenance: dict, import_attrs: dict,
+def write_run(prepared: Prepared, staging: Path, provenance: dict, import_attrs: dict,
               baseline: Baseline | None = None) -> dict:
-    """``staging/run.zarr`` and ``staging/run.json`` (provenance + status ``success``)."""
-    summary = write_store(rec, staging / "run.zarr", provenance, import_attrs, baseline)
+    """``staging/run.zarr`` (:func:`write_store`) and ``staging/run.json`` (provenance + status
+    ``success``). Returns :func:`write_store`'s summary."""
+    summary = write_store(prepared, staging / "run.zarr", provenance, import_attrs, baseline)
     write_run_json(staging / "run.json", provenance, "success",
-                   extra={"import": import_attrs, "baseline": (baseline.to_attrs(rec.fingers) if baseline
+                   extra={"import": import_attrs, "baseline": (baseline.to_attrs(prepared.fingers) if baseline
                                                                else {"method": "none"})})
     return summary
 
