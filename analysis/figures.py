@@ -27,7 +27,7 @@ from . import flows as fl  # noqa: E402
 
 COLOURS = {"approach": "#bbbbbb", "before": "#4c72b0", "during": "#dd8452", "after": "#55a868", "lift": "#999999",
            "pour": "#4c72b0", "initial_slip": "#c44e52", "rotation": "#8172b3", "downward": "#dd8452",
-           "full_slip": "#937860", "contact": "#55a868", "no_contact": "#dddddd", "all": "#ffffff"}
+           "full_slip": "#937860", "held": "#55a868", "contact": "#55a868", "no_contact": "#dddddd", "all": "#ffffff"}
 
 
 def _bands(ax, a, finger):

@@ -25,7 +25,7 @@ import numpy as np
 from . import segments as seg
 
 SWEEP, POUR, GENERIC = "sweep", "pour", "generic"
-POUR_PHASES = ("pour", "initial_slip", "rotation", "downward", "full_slip")
+POUR_PHASES = ("pour", "initial_slip", "rotation", "downward", "full_slip", "held")
 
 
 @dataclass
@@ -98,7 +98,8 @@ class PourPhases:
 
 
 def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | None, rotation_rad: float,
-                trough_prominence: float, distance: int, level: float = 0.5, fast=None) -> PourPhases:
+                trough_prominence: float, distance: int, level: float = 0.5, fast=None,
+                reaction: int | None = None) -> PourPhases:
     """Onsets of the pour phases of one grasp finger.
 
     Args:
@@ -113,6 +114,7 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
         level: the full slip starts when the pressure falls for good below this fraction of
             the way from its level after the contact to its median over the contact.
         fast: (T,) a less smoothed pressure for the full-slip edge (default ``pressure``).
+        reaction: frame of the protocol's first slip reaction (a reactive pour), or None.
 
     - pour: the pour step if recorded inside the contact, else the contact reference;
     - initial_slip: the first sudden fall of ``fast`` after the pour start, deeper than
@@ -127,6 +129,11 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
       there: the tangential load stops growing;
     - full_slip: the last fall of ``fast`` below ``level`` of the way from the level after the
       contact up to its contact median.
+
+    A reactive pour (``reaction`` inside the contact: the protocol tightened the grasp the
+    moment the live detector saw the slip) has ``pour``, ``initial_slip`` (searched up to a
+    few frames after the reaction) and ``held`` from the reaction to the contact's end: the
+    later phases of a falling bottle do not follow.
     """
     a, b = contact
     p = np.asarray(pressure, float)
@@ -136,6 +143,8 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
         start = max(start, pour_event)
     onsets["pour"] = start
     q = p if fast is None else np.asarray(fast, float)
+    if reaction is not None and start < reaction < b:
+        return _reactive_phases(q, onsets, start, reaction, b, trough_prominence, distance, t)
     med = float(np.median(q[a:b]))
     # the level after the contact (the pad unloaded, up to drift), 0 if the record ends in it
     post = float(np.median(q[b:b + max(distance, 5)])) if b < len(q) else 0.0
@@ -182,6 +191,25 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
     onsets["full_slip"] = full if b < len(p) else None
     if onsets["full_slip"] is None:
         reasons["full_slip"] = "the grasp holds until the record ends"
+    return PourPhases(onsets, reasons)
+
+
+REACTED_FRAMES = 3     # frames after the reaction still searched for the initial slip's fall
+
+
+def _reactive_phases(q, onsets, start, reaction, b, trough_prominence, distance, t) -> PourPhases:
+    """:func:`pour_phases` of a pour whose protocol reacted to the slip at frame ``reaction``."""
+    reasons = {}
+    end = min(b, reaction + REACTED_FRAMES)
+    slip = seg.first_drop(q[:end], start, trough_prominence, distance)
+    if slip is None:
+        reasons["initial_slip"] = "no pressure trough between the pour start and the protocol's reaction"
+    onsets["initial_slip"] = slip
+    why = f"not reached: the protocol reacted to the slip at {t[reaction]:.2f} s and the grasp held"
+    for name in ("rotation", "downward", "full_slip"):
+        onsets[name] = None
+        reasons[name] = why
+    onsets["held"] = reaction
     return PourPhases(onsets, reasons)
 
 

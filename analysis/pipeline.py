@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tactile import aggregate as tagg
+from tactile import signals
 
 from . import estimates as est
 from . import flows as fl
@@ -271,9 +272,12 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
 def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dict:
     """Pour phases per grasp finger (its longest contact) and the run's onsets (median)."""
     rate = run.rate_hz
-    pour_event = None
+    pour_event = reaction = None
     for t, name, _ in run.events.of_kind("pour"):
         pour_event = int(np.searchsorted(run.time, t))
+        break
+    for t, name, _ in run.events.of_kind("reaction"):
+        reaction = int(np.searchsorted(run.time, t))
         break
     per_finger = {}
     for f, ivs in contacts.items():
@@ -290,10 +294,16 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
                 curl = np.mean([p.curl for p in parts], axis=0) / 2.0
                 rot[cf.window[0]:cf.window[1]] = seg.smooth(curl, rate, 0.5)
         p = seg.smooth(prepared.proxy[:, k], rate, 0.5)
-        fast = seg.smooth(prepared.proxy[:, k], rate, cfg.segmentation.smooth_s)
+        if reaction is None:
+            fast = seg.smooth(prepared.proxy[:, k], rate, cfg.segmentation.smooth_s)
+        else:
+            # the grasp tightened right after the slip: a smoothed pressure would carry that rise
+            # back over the slip's fall, so the slip is dated on the causal (filter-only) proxy
+            tc = cfg.tactile
+            fast = signals.kalman_filter(prepared.raw_activation[:, k], R=tc.kalman_r, Q=tc.kalman_q).sum(axis=-1)
         ph = lab.pour_phases(run.time, p, (a, b), ref, rot, pour_event, cfg.pour.rotation_rad,
                              cfg.pour.trough_prominence, int(round(cfg.segmentation.distance_s * rate)),
-                             cfg.segmentation.plateau_level, fast=fast)
+                             cfg.segmentation.plateau_level, fast=fast, reaction=reaction)
         for name, why in ph.reasons.items():
             skipped.append({"what": f"phase {name}", "finger": f, "reason": why})
         segments += lab.pour_segments(f, len(run.time), ph, (a, b), ci, margin)

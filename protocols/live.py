@@ -219,6 +219,29 @@ class LiveMonitor:
             self.display(self.line())
 
 
+def replay(model: TactileModel, rest_impedance, seq, t, electrodes, fingers, slip: SlipConfig = SlipConfig(),
+           still=None) -> dict:
+    """Run the online flow and the slip detector over a recorded stream, frame by frame, as a
+    run would have (to measure false alarms on recordings, or tune thresholds).
+
+    Args:
+        rest_impedance: (F, 24) kΩ. seq: (T,) frame numbers. t: (T,) s. electrodes: (T, F, 24)
+        counts. fingers: the F names. still: (T,) bool, the robot still (default: always).
+    Returns ``detections`` [(t, finger, cause)] of every frame that fired, ``first`` (or
+    None), ``frames``, and the online pipeline's per-finger ``counters``.
+    """
+    flow = OnlineFlow(model, rest_impedance, fingers)
+    det = SlipDetector(len(fingers), slip)
+    hits = []
+    for i in range(len(t)):
+        step = flow.push(int(seq[i]), float(t[i]), electrodes[i])
+        state = det.update(float(t[i]), step.processed, step.activation_total,
+                           np.stack([step.mean_col, step.mean_row], axis=-1), step.curl, step.confidence,
+                           still=True if still is None else bool(still[i]))
+        hits += [(float(t[i]), fingers[k], CAUSES[state.cause[k]]) for k in np.flatnonzero(state.fired)]
+    return {"detections": hits, "first": hits[0] if hits else None, "frames": len(t), "counters": flow.counters()}
+
+
 def terminal_display(stream=sys.stderr):
     """A display that rewrites one terminal line in place (nothing when not a terminal)."""
     if not stream.isatty():

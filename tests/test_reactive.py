@@ -79,12 +79,13 @@ def _events(tree, kind):
 @pytest.fixture(scope="module")
 def pours(tmp_path_factory):
     """The same seed, with and without the reflex."""
-    out = {}
+    out = {"stores": {}}
     for name in ("pour_grasp", "pour_grasp_reactive"):
         run_dir = tmp_path_factory.mktemp(name)
         result = run_protocol(_cfg(f"protocol={name}", "hardware.seed=7", *QUIET), run_dir, console=lambda *a: None)
         assert result.status == "success", result.error
         out[name] = xr.open_datatree(result.store, engine="zarr")
+        out["stores"][name] = Path(result.store)
     return out
 
 
@@ -139,3 +140,98 @@ def test_the_live_stream_records_what_the_monitor_saw(pours):
 def test_the_plain_pour_records_no_live_group(pours):
     assert "live" not in pours["pour_grasp"].children
     assert not _events(pours["pour_grasp"], "reaction")
+
+
+# ----------------------------------------------------------------------------- false alarms
+
+BAG = Path("/work/shared/data/biotac_rest_untouched.bag")
+
+
+def test_no_false_alarm_on_the_resting_recording(model):
+    from dataclasses import replace
+
+    from protocols.importers.bag import read_bag
+    from protocols.importers.recording import select_fingers
+    from protocols.live import replay
+    from tactile import signals
+    from tactile.pipeline import TactileModel
+
+    rec, _ = select_fingers(read_bag(BAG))
+    online = TactileModel.build(replace(model.config, smooth=False))
+    rest = signals.baseline_from_rest(rec.electrodes, 0, 100)          # the first second
+    out = replay(online, rest, rec.seq, rec.device_time - rec.device_time[0], rec.electrodes, rec.fingers)
+    assert out["frames"] == 977 and list(rec.fingers) == ["ff", "mf", "th"]
+    assert out["detections"] == []
+    assert all(c["processed"] == 977 for c in out["counters"].values())
+
+
+def test_no_false_alarm_on_a_simulated_sweep(tmp_path):
+    cfg = _cfg("protocol=straws_sweep", "live.enabled=true", *QUIET)
+    result = run_protocol(cfg, tmp_path / "run", console=lambda *a: None)
+    tree = xr.open_datatree(result.store, engine="zarr")
+    live = tree["live"].to_dataset()
+    assert len(live.seq) > 1000 and not live.slip_fired.values.any()
+    assert not _events(tree, "slip")
+    # the finger did slide across the straws: the live flow saw it
+    ff = list(live.live_finger.values).index("ff")
+    assert np.nanmax(live.confidence.values[:, ff]) > 0.5
+
+
+def test_corrupt_and_missing_frames_are_skipped_and_counted_never_taken_for_slip(tmp_path):
+    cfg = _cfg("protocol=pour_grasp_reactive", "hardware.seed=3", *QUIET,
+               "hardware.faults.biotac_dropout=[[8.0,8.2]]", "hardware.faults.biotac_corrupt=[12.0,12.5,13.0]")
+    result = run_protocol(cfg, tmp_path / "run", console=lambda *a: None)
+    assert result.status == "success", result.error
+    tree = xr.open_datatree(result.store, engine="zarr")
+    onset = float(tree["truth/pour/slip_onset"].values) - float(tree.attrs["t0_clock_s"])
+    (slip,) = _events(tree, "slip")
+    assert slip[0] >= onset                                   # not fired by the faults before it
+    counters = tree.attrs["live"]["counters"]
+    assert all(c["skipped_invalid"] == 3 and c["gaps"] >= 1 for c in counters.values()), counters
+    live = tree["live"].to_dataset()
+    bad = ~live.processed.values.all(axis=1)
+    assert bad.sum() == 3 and np.isnan(live.magnitude.values[bad]).all()
+    assert np.isnan(float(tree["truth/pour/full_slip"].values))
+
+
+def test_the_operator_line_shows_each_finger_and_the_slip_state():
+    from hardware.sim import make_sim_lab
+    from protocols.live import LiveConfig, LiveMonitor, tactile_config
+    from tactile.pipeline import TactileModel
+
+    class Rec:
+        t0 = 0.0
+        rows = []
+
+        def live(self, cols):
+            self.rows.append(cols)
+
+    lines = []
+    cfg = LiveConfig(fingers=["ff", "th"], views=["bottom"], console_hz=4.0)
+    model = TactileModel.build(tactile_config({}, cfg.views))
+    with make_sim_lab() as lab:
+        mon = LiveMonitor(lab.biotac, Rec(), model, cfg, lab.clock, display=lines.append)
+        assert mon.line() == "live: taring"
+        lab.clock.sleep(0.3)
+        mon.poll()
+        mon.begin()
+        for _ in range(100):                                  # 1 s of frames, polled every 10 ms
+            lab.clock.sleep(0.01)
+            mon.poll(still=True)
+        summary = mon.close()
+    assert 3 <= len(lines) <= 6                               # about 4 lines a second
+    assert lines[-1].startswith("ff ") and "| th " in lines[-1] and lines[-1].endswith("slip: -")
+    assert summary["frames"] == sum(len(r["seq"]) for r in Rec.rows) >= 99
+    assert summary["tap_overflows"] == 0
+
+
+def test_the_analysis_dates_the_slip_labels_the_held_grasp_and_marks_the_reaction(pours):
+    from analysis.run import analyze_run
+
+    store = pours["stores"]["pour_grasp_reactive"]
+    summary = analyze_run(store, {"progress": False, "max_segment_figures": 0}, console=lambda *a: None)
+    labels = {s["label"] for s in summary["segments"]}
+    assert {"pour", "held"} <= labels and not labels & {"rotation", "downward", "full_slip"}
+    score = json.loads((store.parent / "score.json").read_text())
+    assert abs(score["summary"]["slip_onset_error_ms"]) <= 20
+    assert (store.parent / "figures" / "pressure.png").stat().st_size > 10_000
