@@ -10,7 +10,9 @@ Lifecycle (as Bluesky's RunEngine): ``running`` → one of
 
 Every step is framed by ``step_start``/``step_end`` events in the run store. The engine
 runs on the thread that built the lab: in simulation that thread drives simulated time.
-Steps poll once per BioTac period, watching the stop request and their criteria.
+Steps poll once per BioTac period, watching the stop request and their criteria; with the
+live monitor (:mod:`protocols.live`) each poll also processes the frames received since the
+last one, so ``on_slip`` reactions are issued in the period after the frame that fired.
 """
 
 from __future__ import annotations
