@@ -32,6 +32,7 @@ from tactile.pipeline import TactileConfig, TactileModel
 from tactile.slip import CAUSES, SlipConfig, SlipDetector
 
 ARROWS = "→↘↓↙←↖↑↗"          # image directions: +col is right, +row is down
+RESTART_FRAMES = 10          # frames numbered below the newest seen before a counter restart is believed
 
 
 @dataclass
@@ -127,6 +128,8 @@ class LiveMonitor:
         self.frames = 0
         self.still = True
         self._step = None                               # the newest OnlineStep
+        self._newest_seq = None                         # highest frame number seen
+        self._behind = 0                                # frames in a row numbered below it
 
     # ------------------------------------------------------------------ lifecycle
     def begin(self) -> None:
@@ -176,6 +179,7 @@ class LiveMonitor:
         t0 = self.recorder.t0
         for i, fr in enumerate(frames):
             t = fr.host_time - t0
+            self._follow_restarts(fr.seq)
             step = self._step = self.flow.push(fr.seq, t, fr.electrodes[self.rows])
             mean = np.stack([step.mean_col, step.mean_row], axis=-1)
             state = self.detector.update(t, step.processed, step.activation_total, mean, step.curl,
@@ -191,6 +195,21 @@ class LiveMonitor:
             cols["slip_detected"][i] = state.detected
             self.frames += 1
         return cols
+
+    def _follow_restarts(self, seq: int) -> None:
+        """A sensor whose frame counter restarted (a reconnected bridge) would otherwise be
+        skipped as late for good: after :data:`RESTART_FRAMES` frames in a row numbered below
+        the newest seen, start the online pipeline and the detector afresh."""
+        if self._newest_seq is not None and seq <= self._newest_seq:
+            self._behind += 1
+            if self._behind < RESTART_FRAMES:
+                return
+            self.flow.reset()
+            for f in range(len(self.fingers)):
+                self.detector.reset(f)
+            self.recorder.event("info", "live", {"message": f"BioTac frame counter restarted (seq {seq} after "
+                                                            f"{self._newest_seq}): online flow restarted"})
+        self._newest_seq, self._behind = seq, 0
 
     # ------------------------------------------------------------------ operator
     def line(self) -> str:

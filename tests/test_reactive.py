@@ -235,3 +235,54 @@ def test_the_analysis_dates_the_slip_labels_the_held_grasp_and_marks_the_reactio
     score = json.loads((store.parent / "score.json").read_text())
     assert abs(score["summary"]["slip_onset_error_ms"]) <= 20
     assert (store.parent / "figures" / "pressure.png").stat().st_size > 10_000
+
+
+def test_a_restarted_frame_counter_restarts_the_online_flow_instead_of_blinding_it():
+    from hardware.biotac import BiotacFrame, FrameTap
+    from protocols.live import RESTART_FRAMES, LiveConfig, LiveMonitor, tactile_config
+    from tactile.pipeline import TactileModel
+
+    class Biotac:                        # a sensor whose bridge reconnects mid-run
+        fingers, rate_hz = ("ff",), 100.0
+
+        def tap(self, maxlen):
+            self.the_tap = FrameTap(maxlen)
+            return self.the_tap
+
+        def untap(self, tap):
+            pass
+
+    class Rec:
+        t0 = 0.0
+        events, rows = [], []
+
+        def live(self, cols):
+            self.rows.append(cols)
+
+        def event(self, *e):
+            self.events.append(e)
+
+    class Clock:
+        def now(self):
+            return 0.0
+
+    def frame(seq, t):
+        e = np.full((1, 24), 3000, np.int16)
+        z = np.zeros(1, np.int32)
+        return BiotacFrame(seq, t, t, e, z, z, z, np.zeros((1, 2), np.int16))
+
+    bt, rec = Biotac(), Rec()
+    mon = LiveMonitor(bt, rec, TactileModel.build(tactile_config({}, ["bottom"])), LiveConfig(views=["bottom"]),
+                      Clock())
+    for i in range(50):
+        bt.the_tap.put(frame(1000 + i, i * 0.01))
+    mon.begin()
+    for i in range(50, 100):
+        bt.the_tap.put(frame(1000 + i, i * 0.01))
+    for i in range(100):                                      # the counter starts again at 1
+        bt.the_tap.put(frame(1 + i, 1.0 + i * 0.01))
+    mon.poll()
+    processed = np.concatenate([r["processed"][:, 0] for r in rec.rows])
+    assert processed[:50].all() and not processed[50:50 + RESTART_FRAMES - 1].any()
+    assert processed[50 + RESTART_FRAMES - 1:].all()
+    assert [e[1] for e in rec.events] == ["live"] and "restarted" in rec.events[0][2]["message"]
