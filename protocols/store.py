@@ -422,7 +422,12 @@ async def _append_arrays(items) -> None:
         aa = arr.async_array
         await aa.resize((n0 + len(data), *aa.shape[1:]))
         await aa.setitem(slice(n0, n0 + len(data)), data)
-    await asyncio.gather(*(one(*it) for it in items))
+    # every write finishes before a failure is raised, so the caller's rollback cannot race
+    # a resize still in flight
+    results = await asyncio.gather(*(one(*it) for it in items), return_exceptions=True)
+    errors = [r for r in results if isinstance(r, BaseException)]
+    if errors:
+        raise errors[0]
 
 
 # ------------------------------------------------------------------------ tree writing
