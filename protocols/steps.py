@@ -9,7 +9,8 @@ the YAML key at fault (``protocol.steps[2].sweep.speed``). Each step class knows
 - ``run(ctx)``: execute against the hardware interfaces (see :mod:`protocols.engine`).
 
 Adding a step kind is one class here with its fields, ``plan`` and ``run``, decorated
-with :func:`step`. Units are the protocol's: mm, mm/s, s, N, ml, ml/min, rad.
+with :func:`step`. ``hold`` and ``pour`` may react to slip (``until: slip``, ``on_slip:
+[...]``, see ``docs/live.md``); reactions are :class:`Reaction` steps, which act at once. Units are the protocol's: mm, mm/s, s, N, ml, ml/min, rad.
 
 Surface references (``at``/``to``): ``before:<feature>``, ``after:<feature>``, or
 ``<feature>`` (its centre), where ``<feature>`` is ``feature_<i>``, ``first`` or ``last``;
@@ -259,9 +260,24 @@ class Release(Step):
         ctx.wait(self.duration)
 
 
+class Reaction(Step):
+    """A step that acts at once: in a protocol it acts and the next step follows, in
+    ``on_slip`` it is a reaction (:data:`REACTIONS`). ``check`` validates it at plan time."""
+
+    def check(self, ctx) -> None:
+        pass
+
+    def plan(self, ctx):
+        self.check(ctx)
+        return [], 0.0
+
+    def run(self, ctx):
+        self.react(ctx)
+
+
 @step
 @dataclass
-class Tighten(Step):
+class Tighten(Reaction):
     """Close the grasp further: each of ``fingers`` flexes its two distal joints by
     ``flexion`` rad more in total (half each), from their commanded angles, over ``duration``
     s. As a step it waits ``duration``; as a reaction (``on_slip``) it returns at once."""
@@ -302,16 +318,10 @@ class Tighten(Step):
 
 @step
 @dataclass
-class StopPump(Step):
+class StopPump(Reaction):
     """Stop the pump (the pour ends here)."""
 
     kind: ClassVar[str] = "stop_pump"
-
-    def check(self, ctx) -> None:
-        pass
-
-    def run(self, ctx):
-        self.react(ctx)
 
     def react(self, ctx):
         ctx.lab.pump.stop()
@@ -319,18 +329,12 @@ class StopPump(Step):
 
 @step
 @dataclass
-class Mark(Step):
+class Mark(Reaction):
     """Record an event of kind ``mark`` named ``name`` (with ``note``) in the run store."""
 
     kind: ClassVar[str] = "mark"
     name: str = "mark"
     note: str | None = None
-
-    def check(self, ctx) -> None:
-        pass
-
-    def run(self, ctx):
-        self.react(ctx)
 
     def react(self, ctx):
         ctx.event("mark", self.name, {"note": self.note} if self.note else None)
