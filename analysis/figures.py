@@ -43,10 +43,13 @@ def _bands(ax, a, finger):
 
 
 def _reactions(ax, a) -> None:
-    """Vertical markers at the live slip detections and the reactions they triggered."""
-    for kind, style in (("slip", dict(color="C3", ls="--", lw=1.2)), ("reaction", dict(color="C2", ls="-", lw=1.2))):
+    """Vertical markers at the live slip detections and the reactions they triggered (the
+    detection dashed over the reaction, which follows it within a frame or two)."""
+    for kind, style in (("reaction", dict(color="C2", ls="-", lw=2.5, alpha=0.6)),
+                        ("slip", dict(color="C3", ls="--", lw=1.2, zorder=5))):
         for i, (t, name, detail) in enumerate(a.run.events.of_kind(kind)):
-            what = f"live slip detected ({name}, {detail.get('cause', '?')})" if kind == "slip" else "reactions issued"
+            what = (f"live slip detected {t:.2f} s ({name}, {detail.get('cause', '?')})" if kind == "slip"
+                    else f"reactions issued {t:.2f} s")
             ax.axvline(t, **style, label=what if i == 0 else None)
 
 
