@@ -50,14 +50,9 @@ armed and cannot fire. ``probe_as_if_still`` is the same ungated count from the 
 group's own aggregates (no replay).
 
 Margins: per finger, the largest value of each criterion's statistic over its threshold
-(≥ 1 fires): ``release_fall`` = (one-frame relative fall of the total activation −
-max(trend, 0)) / ``release_drop``; ``release`` = the same over the frames where the flow
-confidence also reaches ``release_confidence`` (null: it never did); ``creep`` = smoothed
-mean-flow speed / ``creep_px`` over views whose direction persistence reaches
-``creep_persistence``; ``rotation`` = smoothed |curl| / ``curl_min``. They come from
-:class:`Probe`, a :class:`tactile.slip.SlipDetector` that reads its own state around each
-frame (only these ratios restate formulas of ``tactile/slip.py``), over every processed
-frame (``*_any``: armed or not) and over the frames the finger was armed (``*_armed``).
+(≥ 1 fires; ``tactile.slip.SlipState.ratios``: ``release``, ``creep``, ``rotation``) over
+every processed frame (``*_any``: armed or not) and over the frames the finger was armed
+(``*_armed``), from :class:`Probe`.
 For simulated runs they are computed from the ``live`` group's aggregates as if the robot
 were always still (so the sweeps' ``creep`` is the deliberate sliding).
 
@@ -101,7 +96,7 @@ BAG = Path("/work/shared/data/biotac_rest_untouched.bag")
 QUIET = ("progress=false", "analyze=false")
 EPISODE_GAP_S = 0.5
 TARGET_MS = 50.0
-MARGINS = ("release", "release_fall", "creep", "rotation")
+MARGINS = ("release", "creep", "rotation")
 
 
 def emit(**row):
@@ -119,9 +114,9 @@ def _r(x, nd=4):
 # ----------------------------------------------------------------------------- the probe
 class Probe(SlipDetector):
     """A :class:`SlipDetector` (its detections are the detector's own) that also keeps, per
-    finger, the peak of each criterion's statistic over its threshold (module docstring),
-    over every frame (``peak_any``) and over the frames it was armed (``peak_armed``), and
-    the number of armed frames."""
+    finger, the peak of each criterion's statistic over its threshold (``SlipState.ratios``),
+    over every processed frame (``peak_any``) and over the frames it was armed
+    (``peak_armed``), and the number of armed frames."""
 
     def __init__(self, n_fingers: int, config: SlipConfig = SlipConfig(), watch=None):
         super().__init__(n_fingers, config, watch)
@@ -131,30 +126,17 @@ class Probe(SlipDetector):
         self.hits: list[tuple[float, int, int]] = []
         self.count_from = -np.inf               # armed frames are counted from this time on
 
-    def _finger(self, f, t, dt, total, mean, curl, confidence, still) -> int:
-        c = self.config
-        prev, trend = self._prev_total[f], self._trend[f]
-        armed = t - self._contact_since[f] >= c.settle_s               # as the detector's `settled`
-        cause = super()._finger(f, t, dt, total, mean, curl, confidence, still)
-        ratio = dict.fromkeys(MARGINS, -np.inf)
-        if not math.isnan(prev):
-            drop = (prev - total) / max(prev, c.contact_kohm)
-            ratio["release_fall"] = (drop - max(trend, 0.0)) / c.release_drop
-            if confidence.max() >= c.release_confidence:
-                ratio["release"] = ratio["release_fall"]
-        speed = np.hypot(self._flow[f, :, 0], self._flow[f, :, 1])
-        persistent = speed / np.maximum(self._length[f], 1e-12) >= c.creep_persistence
-        if persistent.any():
-            ratio["creep"] = speed[persistent].max() / c.creep_px
-        ratio["rotation"] = np.abs(self._curl[f]).max() / c.curl_min
-        self.armed_frames[f] += armed and t >= self.count_from
-        for k, v in ratio.items():
-            self.peak_any[k][f] = max(self.peak_any[k][f], v)
-            if armed:
-                self.peak_armed[k][f] = max(self.peak_armed[k][f], v)
-        if cause and self.watch[f]:
-            self.hits.append((float(t), int(f), int(cause)))
-        return cause
+    def update(self, t, processed, total, mean, curl, confidence, still=True):
+        s = super().update(t, processed, total, mean, curl, confidence, still)
+        ok = np.asarray(processed, bool) & np.isfinite(total)
+        armed = ok & s.in_contact
+        for k, m in enumerate(MARGINS):
+            self.peak_any[m] = np.where(ok, np.maximum(self.peak_any[m], s.ratios[:, k]), self.peak_any[m])
+            self.peak_armed[m] = np.where(armed, np.maximum(self.peak_armed[m], s.ratios[:, k]), self.peak_armed[m])
+        if t >= self.count_from:
+            self.armed_frames += armed
+        self.hits += [(float(t), int(f), int(s.cause[f])) for f in np.flatnonzero(s.fired)]
+        return s
 
     def margins(self, fingers, dt: float) -> dict:
         return {name: {"armed_s": round(float(self.armed_frames[k] * dt), 2),

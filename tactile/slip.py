@@ -7,12 +7,15 @@ steady contact for ``settle_s``):
 ``release``
     the stick-slip release when the object first gives: the skin's stored stretch and part
     of the normal load are let go *at once*, so the total activation (the sum of the 24
-    filtered taxel activations, a PDC proxy) falls by more than ``release_drop`` of its value
-    in one frame, beyond its recent falling trend (an EMA of the per-frame relative change
-    with ``trend_tau_s``), while at least ``release_confidence`` of the footprint moves
-    (the flow confidence, in any view). The trend term is what keeps a finger that is
-    sliding off a feature, or being lifted, from firing: its pressure falls too, but
-    steadily.
+    filtered taxel activations, a PDC proxy) falls within ``release_frames`` frames, beyond
+    its recent falling trend (an EMA of the per-frame relative change with ``trend_tau_s``),
+    by more than ``release_drop`` of its value *and* by more than ``release_noise`` times the
+    finger's own noise over that many frames (an EMA, ``noise_tau_s``, of the per-frame
+    relative change's absolute deviation from the trend, × √frames: a light contact is
+    noisier, relatively, than a firm one), while at least ``release_confidence`` of the
+    footprint moves (the flow confidence, in any view, in one of those frames). The trend
+    term is what keeps a finger that is sliding off a feature, or being lifted, from firing:
+    its pressure falls too, but steadily.
 ``creep``
     persistent sliding: the mean flow vector, smoothed with ``creep_tau_s``, exceeds
     ``creep_px`` px/frame and keeps its direction (persistence, |EMA of the vector| / EMA
@@ -51,8 +54,11 @@ class SlipConfig:
     contact_kohm: float = 0.5          # total activation that counts as contact [kΩ]
     settle_s: float = 0.5              # contact held this long before a slip can be declared [s]
     release_drop: float = 0.1          # one-frame relative fall of the total activation [1]
-    release_confidence: float = 0.2    # fraction of the footprint moving in that frame [1]
+    release_frames: int = 3            # frames over which the fall is summed [1]
+    release_confidence: float = 0.2    # fraction of the footprint moving in one of them [1]
+    release_noise: float = 10.0        # ... and that many times the finger's relative noise [1]
     trend_tau_s: float = 0.1           # time constant of the pressure trend [s]
+    noise_tau_s: float = 1.0           # time constant of the noise estimate [s]
     creep_px: float = 0.01             # smoothed mean-flow magnitude [px/frame]
     creep_persistence: float = 0.7     # direction persistence of the smoothed flow [1]
     creep_tau_s: float = 0.1           # time constant of the flow and curl smoothing [s]
@@ -63,6 +69,8 @@ class SlipConfig:
         for name, value in self.__dict__.items():
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"slip.{name}: expected a number > 0, got {value!r}")
+        if self.release_frames != int(self.release_frames):
+            raise ValueError(f"slip.release_frames: expected a whole number of frames, got {self.release_frames}")
         if not self.creep_persistence <= 1:
             raise ValueError(f"slip.creep_persistence: expected a value in (0, 1], got {self.creep_persistence}")
 
@@ -76,6 +84,9 @@ class SlipState:
         fired: the finger detected slip in this frame.
         cause: code into :data:`CAUSES` of what fired (0 if nothing).
         in_contact: the finger is in settled contact (the detector is armed for it).
+        ratios: (F, 3) each criterion's statistic over its threshold in this frame (release,
+            creep, rotation; ≥ 1 fires when armed, creep and rotation only while still): how
+            close a finger came.
         first: ``(t, finger index, cause code)`` of the first detection since the last
             :meth:`SlipDetector.rearm`, or ``None``.
     """
@@ -84,6 +95,7 @@ class SlipState:
     fired: np.ndarray
     cause: np.ndarray
     in_contact: np.ndarray
+    ratios: np.ndarray
     first: tuple[float, int, int] | None = None
 
     @property
@@ -109,11 +121,15 @@ class SlipDetector:
         self._last_t = np.full(F, -np.inf)
         self._prev_total = np.full(F, np.nan)
         self._trend = np.zeros(F)
+        self._noise = np.zeros(F)                 # EMA of |relative change − trend|
+        self._excess = np.zeros((F, int(config.release_frames)))   # recent falls beyond the trend
+        self._moved = np.zeros((F, int(config.release_frames)))    # and the confidence then
+        self._slot = np.zeros(F, np.int64)
         self._contact_since = np.full(F, np.nan)
         self._flow = None                         # (F, V, 2) EMA of the mean flow vector
         self._length = None                       # (F, V) EMA of its length
         self._curl = None                         # (F, V) EMA of the curl
-        self.state = SlipState(-np.inf, np.zeros(F, bool), np.zeros(F, np.int8), np.zeros(F, bool))
+        self.state = SlipState(-np.inf, np.zeros(F, bool), np.zeros(F, np.int8), np.zeros(F, bool), np.zeros((F, 3)))
 
     def rearm(self) -> None:
         """Forget the first detection (the per-finger state is kept)."""
@@ -123,6 +139,9 @@ class SlipDetector:
         """Start finger ``finger`` from scratch (as after a pause in its stream)."""
         self._prev_total[finger] = np.nan
         self._trend[finger] = 0.0
+        self._noise[finger] = 0.0
+        self._excess[finger] = 0.0
+        self._moved[finger] = 0.0
         self._contact_since[finger] = np.nan
         if self._flow is not None:
             self._flow[finger] = 0.0
@@ -184,21 +203,29 @@ class SlipDetector:
             self._contact_since[f] = np.nan
         elif math.isnan(self._contact_since[f]):
             self._contact_since[f] = t
+        ratios = self.state.ratios[f]
+        ratios[:] = 0.0
         if math.isnan(prev):
             return 0
         drop = (prev - total) / max(prev, c.contact_kohm)           # relative fall this frame
-        trend = self._trend[f]
+        trend, noise = self._trend[f], self._noise[f]
         self._trend[f] += a_trend * (drop - trend)
+        self._noise[f] += (1.0 - math.exp(-dt / c.noise_tau_s)) * (abs(drop - trend) - noise)
+        k = self._slot[f] = (self._slot[f] + 1) % self._excess.shape[1]
+        self._excess[f, k] = drop - max(trend, 0.0)
+        self._moved[f, k] = confidence.max()
+        # each criterion's statistic over its threshold: ≥ 1 fires (see the module docstring)
+        if self._moved[f].max() >= c.release_confidence:
+            frames = self._excess.shape[1]
+            ratios[0] = self._excess[f].sum() / max(c.release_drop, c.release_noise * noise * math.sqrt(frames))
+        speed = np.hypot(self._flow[f, :, 0], self._flow[f, :, 1])
+        persistent = speed >= c.creep_persistence * np.maximum(self._length[f], 1e-12)
+        if persistent.any():
+            ratios[1] = speed[persistent].max() / c.creep_px
+        ratios[2] = np.abs(self._curl[f]).max() / c.curl_min
         if not settled:
             return 0
-        if drop - max(trend, 0.0) >= c.release_drop and confidence.max() >= c.release_confidence:
-            return 1
-        if not still:
-            return 0
-        speed = np.hypot(self._flow[f, :, 0], self._flow[f, :, 1])
-        persistence = speed / np.maximum(self._length[f], 1e-12)
-        if np.any((speed >= c.creep_px) & (persistence >= c.creep_persistence)):
-            return 2
-        if np.any(np.abs(self._curl[f]) >= c.curl_min):
-            return 3
+        for cause in (1, 2, 3) if still else (1,):
+            if ratios[cause - 1] >= 1.0:
+                return cause
         return 0

@@ -51,9 +51,11 @@ def test_no_slip_before_the_contact_has_settled():
 
 
 def test_steady_fall_of_a_finger_sliding_off_a_feature_is_not_slip():
-    # pressure falling 5 % per frame with the whole footprint moving: a sweep leaving a straw
+    # pressure falling ever faster, to 6 % per frame, with the whole footprint moving: a sweep
+    # leaving a straw (the simulated sweeps' falls steepen over about 0.3 s)
     total = grip()
-    total[100:] = total[100:] * 0.95 ** np.arange(1, 101)[:, None]
+    rate = np.minimum(np.arange(1, 101) / 30.0, 1.0) * 0.06
+    total[100:] = total[100:] * np.cumprod(1 - rate)[:, None]
     conf = np.full((200, 1, 1), 0.8)
     mean = np.zeros((200, 1, 1, 2))
     mean[..., 0] = 0.05
@@ -123,3 +125,14 @@ def test_only_watched_fingers_fire_and_rearm_forgets():
 def test_bad_thresholds_are_refused_by_name(key, value):
     with pytest.raises(ValueError, match=f"slip.{key}"):
         SlipConfig(**{key: value})
+
+
+def test_a_light_noisy_contact_needs_a_drop_well_above_its_own_noise():
+    rng = np.random.default_rng(5)
+    total = (1.2 + rng.normal(0, 0.03, 400))[:, None]          # ±2.5 % per frame: a light touch
+    total[200] = total[199] * 0.89                           # an 11 % dip: noise for this finger
+    total[201:] = total[201:] * 0.95
+    conf = np.full((400, 1, 1), 0.3)
+    assert feed(SlipDetector(1), total, confidence=conf) == []
+    total[300:] *= 0.55                                      # a 45 % release: slip
+    assert feed(SlipDetector(1), total, confidence=conf)[0][:2] == (3.0, 0)
