@@ -129,7 +129,7 @@ def test_bad_thresholds_are_refused_by_name(key, value):
 
 def test_a_light_noisy_contact_needs_a_drop_well_above_its_own_noise():
     rng = np.random.default_rng(5)
-    total = (1.2 + rng.normal(0, 0.03, 400))[:, None]          # ±2.5 % per frame: a light touch
+    total = (1.2 + rng.normal(0, 0.015, 400))[:, None]         # ±1.3 % per frame: a light touch
     total[200] = total[199] * 0.89                           # an 11 % dip: noise for this finger
     total[201:] = total[201:] * 0.95
     conf = np.full((400, 1, 1), 0.3)
