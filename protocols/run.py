@@ -15,13 +15,14 @@ from omegaconf import OmegaConf
 from tqdm import tqdm
 
 from hardware.errors import ConfigError
+from tactile.frames import DEFAULT_VIEWS
 from tactile.geometry import load_taxels
 from tactile.pipeline import TactileModel
 
 from . import provenance
 from .engine import FAILED, Outcome, RunEngine
 from .lab import make_lab
-from .live import LiveMonitor, live_fingers, live_settings, tactile_config, terminal_display
+from .live import LiveConfig, LiveMonitor, live_fingers, live_settings, tactile_config, terminal_display
 from .plan import Plan, format_timeline, make_plan
 from .recorder import Recorder
 from .steps import ProtocolError
@@ -56,12 +57,11 @@ def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
     """
     run_dir = Path(run_dir)
     plan = make_plan(cfg)
+    live, model = live_setup(cfg, plan, build=not cfg.plan_only)
     if cfg.plan_only:
         console(format_timeline(plan))
         return RunResult("planned", run_dir, plan)
 
-    live = live_settings(cfg)
-    model = live_model(cfg, plan)
     lab = make_lab(cfg)
     run_dir.mkdir(parents=True, exist_ok=True)
     store_path = run_dir / "run.zarr"
@@ -99,10 +99,11 @@ def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
     return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)
 
 
-def live_model(cfg, plan: Plan) -> TactileModel | None:
-    """The online tactile model when the run computes live flow (``live.enabled``, or auto
-    when a step reacts to slip), else ``None``. A protocol that reacts to slip with the live
-    monitor turned off is refused here, before anything moves."""
+def live_setup(cfg, plan: Plan, build: bool = True) -> tuple[LiveConfig, TactileModel | None]:
+    """The checked ``live`` settings and, when the run computes live flow (``live.enabled``,
+    or auto when a step reacts to slip) and ``build``, the online tactile model (else
+    ``None``). A protocol that reacts to slip with the live monitor turned off is refused
+    here, before anything moves."""
     try:
         live = live_settings(cfg)
     except (ValueError, TypeError) as exc:
@@ -112,14 +113,19 @@ def live_model(cfg, plan: Plan) -> TactileModel | None:
         raise ProtocolError(reacting[0], "reacts to slip, but live.enabled=false turns the slip detector off; "
                                          "drop live.enabled=false or the step's until: slip / on_slip")
     if not (live.enabled or reacting):
-        return None
+        return live, None
     unknown = [f for f in live.fingers or () if f not in cfg.hardware.fingers]
     if unknown:
         raise ConfigError("live.fingers", f"{unknown} have no sensor in hardware.fingers {list(cfg.hardware.fingers)}")
     try:
-        return TactileModel.build(tactile_config(cfg.get("analysis") or {}, live.views))
+        tactile = tactile_config(cfg.get("analysis") or {}, live.views)
     except ValueError as exc:
         raise ConfigError("live", str(exc)) from None
+    known = {**DEFAULT_VIEWS, **tactile.custom_views}
+    bad = [v for v in live.views if v not in known] or ([] if live.views else ["(none)"])
+    if bad:
+        raise ConfigError("live.views", f"{bad}: expected one or more of {sorted(known)}")
+    return live, TactileModel.build(tactile) if build else None
 
 
 def hand_off(result: RunResult, analysis_cfg, console=print) -> dict | None:

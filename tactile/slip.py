@@ -47,9 +47,11 @@ CAUSES = ("", "release", "creep", "rotation")
 """Codes of :attr:`SlipState.cause`: 0 none, 1 release, 2 creep, 3 rotation."""
 
 
-@dataclass(frozen=True)
+@dataclass
 class SlipConfig:
-    """Thresholds of :class:`SlipDetector` (see the module docstring). Units in brackets."""
+    """Thresholds of :class:`SlipDetector` (see the module docstring). Units in brackets.
+    (Not frozen: it is also the schema of the ``live.slip`` config node, which Hydra
+    overrides key by key.)"""
 
     contact_kohm: float = 0.5          # total activation that counts as contact [kΩ]
     settle_s: float = 0.5              # contact held this long before a slip can be declared [s]

@@ -13,7 +13,7 @@ import xarray as xr
 from hydra import compose, initialize_config_dir
 
 from protocols.plan import make_plan
-from protocols.run import live_model, run_protocol
+from protocols.run import live_setup, run_protocol
 from protocols.schema import register
 from protocols.steps import Criterion, ProtocolError
 
@@ -65,9 +65,21 @@ def test_a_reacting_protocol_with_the_live_monitor_off_is_refused_before_anythin
 
 
 def test_live_monitor_is_only_built_when_needed():
-    assert live_model(_cfg("protocol=straws_sweep"), make_plan(_cfg("protocol=straws_sweep"))) is None
+    assert live_setup(_cfg("protocol=straws_sweep"), make_plan(_cfg("protocol=straws_sweep")))[1] is None
     cfg = _cfg("protocol=straws_sweep", "live.enabled=true", "live.views=[bottom]")
-    assert live_model(cfg, make_plan(cfg)).config.views == ("bottom",)
+    assert live_setup(cfg, make_plan(cfg))[1].config.views == ("bottom",)
+
+
+@pytest.mark.parametrize("override, key", [("live.fingers=[ff,zz]", "live.fingers"),
+                                           ("live.views=[bottom,top]", "live.views"),
+                                           ("live.slip.release_drop=-0.2", "live")])
+def test_bad_live_settings_are_refused_by_key(override, key):
+    """(Unknown keys never get this far: the run config's schema refuses them at composition.)"""
+    from hardware.errors import ConfigError
+    cfg = _cfg("protocol=pour_grasp_reactive", override)
+    with pytest.raises(ConfigError) as err:
+        live_setup(cfg, make_plan(cfg))
+    assert err.value.key == key
 
 
 def _events(tree, kind):
