@@ -136,7 +136,7 @@ def test_the_live_stream_records_what_the_monitor_saw(pours):
     tree = pours["pour_grasp_reactive"]
     live = tree["live"].to_dataset()
     assert list(live.live_finger.values) == ["ff", "mf", "th"]
-    assert list(live.view.values) == ["bottom", "left", "right"]
+    assert list(live.view.values) == ["bottom"]
     assert live.magnitude.dims == ("time_live", "live_finger", "view")
     # one row per BioTac frame after the tare, joined by seq
     seqs = tree["biotac/seq"].values
