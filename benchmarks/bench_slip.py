@@ -270,7 +270,7 @@ def rest_job(kind: str, seed: int, grip_seconds: float = 60.0, flexion: float = 
     the ungated replay."""
     from protocols.live import live_settings, replay
     from protocols.plan import make_plan
-    from protocols.run import live_model
+    from protocols.run import live_setup
     from tactile import signals
 
     t_wall = time.perf_counter()
@@ -319,7 +319,7 @@ def rest_job(kind: str, seed: int, grip_seconds: float = 60.0, flexion: float = 
             i0, i1 = np.searchsorted(tt, tare[2]["start"]), np.searchsorted(tt, tare[2]["end"])
             rest = signals.baseline_from_rest(e, int(i0), int(i1))
             keep = (tt >= tare[2]["end"]) & (tt < end)
-            model = live_model(cfg, make_plan(cfg))
+            model = live_setup(cfg, make_plan(cfg))[1]
             out = replay(model, rest, bt.seq.values[keep], tt[keep], e[keep], touched, slip_cfg) if touched else \
                 {"detections": [], "frames": int(keep.sum())}
             ht = [h[0] for h in out["detections"]]
