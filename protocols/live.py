@@ -79,6 +79,15 @@ def live_settings(cfg) -> LiveConfig:
     return LiveConfig(**values)
 
 
+def warm_up(model: TactileModel, views) -> None:
+    """Run the online pipeline on a few made-up frames, so that its compiled kernels (numba
+    compiles on first use: seconds on the first run after an install) are ready before the
+    run starts, not while the first frames queue up."""
+    flow = OnlineFlow(model, np.full((1, 24), 10.0), ("ff",), views)
+    for i in range(3):
+        flow.push(i, 0.01 * i, np.full((1, 24), 3000 - 100 * i))
+
+
 def tactile_config(analysis: dict, views) -> TactileConfig:
     """The online pipeline's parameters: the analysis config's ``tactile`` and ``flow``
     (so live and offline frames are the same), the live ``views``, and no smoother."""

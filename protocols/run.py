@@ -22,7 +22,7 @@ from tactile.pipeline import TactileModel
 from . import provenance
 from .engine import FAILED, Outcome, RunEngine
 from .lab import make_lab
-from .live import LiveConfig, LiveMonitor, live_fingers, live_settings, tactile_config, terminal_display
+from .live import LiveConfig, LiveMonitor, live_fingers, live_settings, tactile_config, terminal_display, warm_up
 from .plan import Plan, format_timeline, make_plan
 from .recorder import Recorder
 from .steps import ProtocolError
@@ -125,7 +125,11 @@ def live_setup(cfg, plan: Plan, build: bool = True) -> tuple[LiveConfig, Tactile
     bad = [v for v in live.views if v not in known] or ([] if live.views else ["(none)"])
     if bad:
         raise ConfigError("live.views", f"{bad}: expected one or more of {sorted(known)}")
-    return live, TactileModel.build(tactile) if build else None
+    if not build:
+        return live, None
+    model = TactileModel.build(tactile)
+    warm_up(model, live.views)
+    return live, model
 
 
 def hand_off(result: RunResult, analysis_cfg, console=print) -> dict | None:
