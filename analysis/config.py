@@ -45,8 +45,26 @@ class Estimates:
 
 @dataclass(frozen=True)
 class Pour:
-    rotation_rad: float = 0.01
+    rotation_rad: float = 0.03
     trough_prominence: float = 0.15
+
+
+@dataclass(frozen=True)
+class Contact:
+    method: str = "auto"
+    threshold_sigma: float = 6.0
+    despike_frames: int = 5
+    stored_uncertainty_counts: float = 10.0
+
+
+@dataclass(frozen=True)
+class Slip:
+    min_displacement_mm: float = 0.5
+    min_rotation_deg: float = 3.0
+    views: tuple = ("bottom",)
+
+
+REFERENCES = ("auto", "unloaded", "contact_onset", "time")
 
 
 @dataclass(frozen=True)
@@ -62,6 +80,11 @@ class AnalysisConfig:
     segmentation: Segmentation = field(default_factory=Segmentation)
     estimates: Estimates = field(default_factory=Estimates)
     pour: Pour = field(default_factory=Pour)
+    contact: Contact = field(default_factory=Contact)
+    slip: Slip = field(default_factory=Slip)
+    reference: str = "auto"
+    reference_time_s: float | None = None
+    intensity: str = "contact"
     save_fields: bool = False
     figures: bool = True
     max_segment_figures: int = 12
@@ -72,6 +95,7 @@ class AnalysisConfig:
 _TACTILE_KEYS = {"kalman_r": float, "kalman_q": float, "smooth": bool, "sigma": float, "kernel": str,
                  "geodesic": str, "mesh_spacing": float, "scale": float, "render": str, "size": list,
                  "intensity_range": list, "noise": float, "chunk": int}
+_FLOW_ANALYSIS_KEYS = {"reference", "reference_time_s"}
 _FLOW_KEYS = {"method": str, "pyr_scale": float, "levels": int, "winsize": int, "iterations": int,
               "poly_n": int, "poly_sigma": float, "flags": int, "dis_preset": int, "dis": dict, "tvl1": dict}
 
@@ -134,18 +158,32 @@ def load_config(node=None) -> AnalysisConfig:
     raw = _plain(node)
     d = dict(raw)
     known = {"enabled", "tactile", "views", "flow", "baseline", "pressure", "segmentation", "estimates",
-             "pour", "save_fields", "figures", "max_segment_figures", "progress"}
+             "pour", "contact", "slip", "save_fields", "figures", "max_segment_figures", "progress"}
     unknown = sorted(set(d) - known)
     if unknown:
         raise AnalysisConfigError(f"analysis.{unknown[0]}: unknown key; expected one of {sorted(known)}")
-    tac = d.get("tactile") or {}
+    tac = dict(d.get("tactile") or {})
+    # intensity_range: "contact" (each contact window spans 0..255 up to its own peak), or [low, high] kΩ
+    intensity = "contact" if tac.get("intensity_range", "contact") == "contact" else "fixed"
+    if intensity == "contact":
+        tac.pop("intensity_range", None)
     bad = sorted(set(tac) - set(_TACTILE_KEYS))
     if bad:
         raise AnalysisConfigError(f"analysis.tactile.{bad[0]}: unknown key; expected one of {sorted(_TACTILE_KEYS)}")
-    fl = d.get("flow") or {}
+    fl = dict(d.get("flow") or {})
+    reference = _typed("flow.reference", fl.pop("reference", "auto"), str)
+    if reference not in REFERENCES:
+        raise AnalysisConfigError(f"analysis.flow.reference: expected one of {', '.join(REFERENCES)}, got {reference!r}")
+    ref_time = fl.pop("reference_time_s", None)
+    if ref_time is not None:
+        ref_time = _typed("flow.reference_time_s", ref_time, float)
+    if reference == "time" and (ref_time is None or not ref_time >= 0):
+        raise AnalysisConfigError("analysis.flow.reference_time_s: expected a time ≥ 0 s (since run start) "
+                                  f"with flow.reference=time, got {ref_time!r}")
     bad = sorted(set(fl) - set(_FLOW_KEYS))
     if bad:
-        raise AnalysisConfigError(f"analysis.flow.{bad[0]}: unknown key; expected one of {sorted(_FLOW_KEYS)}")
+        raise AnalysisConfigError(f"analysis.flow.{bad[0]}: unknown key; expected one of "
+                                  f"{sorted(set(_FLOW_KEYS) | _FLOW_ANALYSIS_KEYS)}")
     views = d.get("views", ["bottom", "left", "right"])
     if not isinstance(views, list) or not views or not all(isinstance(v, str) for v in views):
         raise AnalysisConfigError(f"analysis.views: expected a non-empty list of view names, got {views!r}")
@@ -196,11 +234,32 @@ def load_config(node=None) -> AnalysisConfig:
     signal = _typed("pressure.signal", pres.get("signal", "auto"), str)
     if signal not in ("auto", "pdc", "proxy"):
         raise AnalysisConfigError(f"analysis.pressure.signal: expected auto, pdc or proxy, got {signal!r}")
+    con = _section(Contact, "contact", d.get("contact") or {})
+    if con.method not in ("auto", "pressure", "pattern"):
+        raise AnalysisConfigError(f"analysis.contact.method: expected auto, pressure or pattern, got {con.method!r}")
+    _positive("contact.threshold_sigma", con.threshold_sigma)
+    if con.despike_frames < 1:
+        raise AnalysisConfigError(f"analysis.contact.despike_frames: expected an integer ≥ 1, got {con.despike_frames}")
+    if not con.stored_uncertainty_counts >= 0:
+        raise AnalysisConfigError(f"analysis.contact.stored_uncertainty_counts: expected a value ≥ 0, "
+                                  f"got {con.stored_uncertainty_counts}")
+    sl = dict(d.get("slip") or {})
+    if "views" in sl:
+        if not isinstance(sl["views"], list) or not sl["views"] or not all(v in views for v in sl["views"]):
+            raise AnalysisConfigError(f"analysis.slip.views: expected a non-empty list of the analysed views "
+                                      f"{views}, got {sl['views']!r}")
+        sl["views"] = tuple(sl["views"])
+    slip = _section(Slip, "slip", sl)
+    for k in ("min_displacement_mm", "min_rotation_deg"):
+        if not getattr(slip, k) >= 0:
+            raise AnalysisConfigError(f"analysis.slip.{k}: expected a value ≥ 0, got {getattr(slip, k)!r}")
     top = {k: _typed(k, d[k], t) for k, t in (("enabled", bool), ("save_fields", bool), ("figures", bool),
                                               ("max_segment_figures", int), ("progress", bool)) if k in d}
     return AnalysisConfig(tactile=tactile, views=tuple(views), baseline_fallback_window_s=window,
                           baseline_fallback_contact_min=fb_min,
-                          pressure_signal=signal, segmentation=seg, estimates=est, pour=pour, raw=raw, **top)
+                          pressure_signal=signal, segmentation=seg, estimates=est, pour=pour, contact=con,
+                          slip=slip, reference=reference, reference_time_s=ref_time, intensity=intensity,
+                          raw=raw, **top)
 
 
 def as_dict(cfg: AnalysisConfig) -> dict[str, Any]:

@@ -1,9 +1,23 @@
 """Tactile frames and flow for every finger in contact, only over its contacts (plus margins).
 
 For each contact window [start − margin, stop + margin) of a finger and each configured view,
-:func:`tactile.pipeline.process_view` renders the frames and computes the dynamic flow and the
-static flow from the frame where the contact became established
-(:func:`tactile.flow.contact_reference`). Frames out of contact are never rendered.
+:func:`tactile.pipeline.process_view` renders the frames and computes the dynamic flow and
+the static flow from the run's primary reference (``analysis.flow.reference``):
+
+- ``contact_onset``: the frame where the contact became established
+  (:func:`tactile.flow.contact_reference` on the contact signal) — the default of a run with a
+  tare, whose contacts begin inside the record;
+- ``unloaded``: the sensor at rest (zero activation, an empty frame) — the default without a
+  tare: a record that begins in contact has no onset, and the pattern's offset from the
+  unloaded state is what carries a slip's direction there;
+- ``time``: the frame at ``analysis.flow.reference_time_s``.
+
+The views of the slip estimate (``analysis.slip.views``) also get the static flow from the
+other references, as evidence. Frames out of contact are never rendered. Intensity
+(``analysis.tactile.intensity_range``): ``contact`` maps 0 kΩ … the window's peak activation
+to 0 … 255, so a light contact uses the whole 8-bit range as a firm one does (Farnebäck's
+estimate shrinks with the image's contrast: at 1/50 of full scale it reports 2 % of a
+blob's true shift); a fixed ``[low, high]`` maps the same kΩ to the same grey in every window.
 """
 
 from __future__ import annotations
@@ -15,7 +29,11 @@ import numpy as np
 
 from tactile import aggregate as tagg
 from tactile import flow as tflow
-from tactile.pipeline import ViewResult, process_view
+from tactile.pipeline import UNLOADED, ViewResult, process_view
+
+ONSET, TIME = "contact_onset", "time"
+MIN_PEAK_KOHM = 0.1
+"""Smallest top of a contact window's intensity range (kΩ): noise alone is never stretched to full scale."""
 
 
 @dataclass
@@ -26,7 +44,9 @@ class ContactFlow:
         finger: finger name; ``k``: its index in the run.
         contact: (start, stop) frame indices of the contact itself.
         window: (w0, w1) frames processed (contact plus margins), absolute indices.
-        reference: absolute frame index of the static-flow reference (contact established) or None.
+        reference: absolute frame index where the contact became established, or None.
+        begins_in_contact: the record is already in contact at its first frame (there is no
+            onset to see: ``reference`` is then only the first settled frame).
         views: view name → :class:`tactile.pipeline.ViewResult` (indices relative to ``w0``).
     """
 
@@ -35,18 +55,41 @@ class ContactFlow:
     contact: tuple[int, int]
     window: tuple[int, int]
     reference: int | None
+    begins_in_contact: bool = False
     views: dict[str, ViewResult] = field(default_factory=dict)
 
     def covers(self, start: int, stop: int) -> bool:
         return self.window[0] <= start and stop <= self.window[1]
 
 
+@dataclass(frozen=True)
+class FlowPlan:
+    """What :func:`compute` computes: the primary static reference and the extra evidence.
+
+    ``primary``: ``contact_onset``, ``unloaded`` or ``time``; ``reference_frame``: absolute
+    frame of the ``time`` reference; ``evidence_views``: views that get the static flow from
+    every available reference; ``intensity``: ``contact`` or ``fixed``."""
+
+    primary: str
+    reference_frame: int | None = None
+    evidence_views: tuple[str, ...] = ()
+    intensity: str = "contact"
+
+
+def primary_reference(setting: str, baseline_kind: str) -> str:
+    """``analysis.flow.reference`` resolved: ``auto`` is the contact onset after a tare, else unloaded."""
+    if setting != "auto":
+        return setting
+    return ONSET if baseline_kind == "tare" else UNLOADED
+
+
 def compute(prepared, contacts: dict[str, list[tuple[int, int]]], fingers: list[str], model, margin: int,
-            threshold: dict[str, float], settle: int, keep_fields: bool = False, progress: bool = True):
+            signal: np.ndarray, threshold: dict[str, float], settle: int, plan: FlowPlan,
+            keep_fields: bool = False, progress: bool = True):
     """Flow for every (finger, contact). Returns (list of ContactFlow, seconds spent in flow+render).
 
-    ``contacts``: finger → contact intervals; ``threshold``: finger → pressure threshold used
-    for the static reference.
+    ``contacts``: finger → contact intervals; ``signal`` (T, F) and ``threshold``: finger →
+    level: the contact signal and its threshold, for the contact onset.
     """
     from tqdm import tqdm
     views = list(model.plans)
@@ -63,17 +106,24 @@ def compute(prepared, contacts: dict[str, list[tuple[int, int]]], fingers: list[
     try:
         for f, k, (a, b), (w0, w1) in jobs:
             act = prepared.activation[w0:w1, k]
-            ref = None
             try:
-                ref = w0 + tflow.contact_reference(prepared.pressure[w0:w1, k], threshold[f],
-                                                   settle=min(settle, max(1, b - a)))
+                onset = w0 + tflow.contact_reference(signal[w0:w1, k], threshold[f], settle=min(settle, max(1, b - a)))
             except ValueError:
-                ref = None
-            cf = ContactFlow(f, k, (a, b), (w0, w1), ref)
+                onset = None
+            cf = ContactFlow(f, k, (a, b), (w0, w1), onset, begins_in_contact=a == 0)
+            refs = {UNLOADED: None}
+            if onset is not None:
+                refs[ONSET] = onset - w0
+            if plan.reference_frame is not None and w0 <= plan.reference_frame < w1:
+                refs[TIME] = plan.reference_frame - w0
+            intensity = None
+            if plan.intensity == "contact":
+                intensity = (0.0, max(float(act.max()), MIN_PEAK_KOHM))
             t0 = _time.perf_counter()
             for v in views:
-                cf.views[v] = process_view(model, act, v, reference=None if ref is None else ref - w0,
-                                           keep_fields=keep_fields, progress=bar.update)
+                wanted = refs if v in plan.evidence_views else {r: i for r, i in refs.items() if r == plan.primary}
+                cf.views[v] = process_view(model, act, v, references=wanted, primary=plan.primary,
+                                           intensity_range=intensity, keep_fields=keep_fields, progress=bar.update)
             spent += _time.perf_counter() - t0
             out.append(cf)
     finally:
@@ -92,11 +142,16 @@ def find(flows: list[ContactFlow], finger: str, start: int, stop: int) -> Contac
 def window_summary(cf: ContactFlow, view: str, start: int, stop: int, model, rate_hz: float,
                    kind: str = "dynamic") -> dict | None:
     """Aggregates of frames [start, stop) (absolute) of one view, with the mean vector in the
-    sensor frame: mm/s for the dynamic flow, mm for the static flow. ``None`` if unavailable."""
+    sensor frame: mm/s for the dynamic flow, mm for the static flow. ``kind``: ``dynamic``,
+    ``static`` (the primary reference) or a reference's name (``unloaded``,
+    ``contact_onset``, ``time``). ``None`` if unavailable."""
     vr = cf.views.get(view)
     if vr is None:
         return None
-    agg = vr.dynamic if kind == "dynamic" else vr.static
+    if kind == "dynamic":
+        agg = vr.dynamic
+    else:
+        agg = vr.static if kind == "static" else vr.statics.get(kind)
     if agg is None:
         return None
     s, e = start - cf.window[0], stop - cf.window[0]
@@ -113,6 +168,18 @@ def window_summary(cf: ContactFlow, view: str, start: int, stop: int, model, rat
     # curl of a displacement field is twice the rotation angle (rad), of a velocity field 2ω (per frame)
     w["rotation"] = w["curl"] / 2.0 * (rate_hz if kind == "dynamic" else 1.0)
     return w
+
+
+def static_series(cf: ContactFlow, view: str, reference: str, model) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per-frame static flow of a window from ``reference``: the mean vector in the sensor
+    frame (W, 3) mm and the rotation (W,) rad (curl / 2 of a displacement field, about the
+    view's look axis), or ``None`` if that flow was not computed."""
+    vr = cf.views.get(view)
+    agg = None if vr is None else vr.statics.get(reference)
+    if agg is None:
+        return None
+    plan = model.plans[view]
+    return plan.image_to_sensor(agg.mean) * plan.mm_per_px, agg.curl / 2.0
 
 
 def combined_direction(cf: ContactFlow, start: int, stop: int, model, rate_hz: float):

@@ -37,10 +37,16 @@ class RunData:
         path: the store.
         time: (T,) BioTac frame times, s.
         fingers: finger names along axis 1 of ``electrodes``.
-        electrodes: (T, F, 24) raw counts (float64; invalid frames removed).
+        electrodes: (T, F, 24) raw counts (float64). Frames no finger can use and frames
+            with a bad time stamp are removed (``dropped``); a finger's own bad samples stay,
+            marked in ``valid``.
+        valid: (T, F) bool, the finger's 24 electrodes all within 1..4094 counts (0 is a
+            short or a deleted chunk read back as zeros, 4095 a saturated or shorted channel).
         pdc: (T, F) PDC counts or ``None`` (records with electrodes only).
         baseline_counts: (F, 24) stored unloaded electrode counts (an imported recording's
-            calibration or estimate, ``biotac/baseline``) or ``None``.
+            calibration or estimate, a recorded run's session calibration: ``biotac/baseline``)
+            or ``None``; ``baseline_uncertainty`` (F, 24) counts, its stated uncertainty, if stored.
+        dropped: what was removed from the record and why: ``{"what", "frames", "reason"}``.
         arm_time, tcp_pose, tcp_speed: (A,), (A, 6) m/rad, (A, 6) m/s, rad/s, or ``None``.
         events: the event table (empty if the group is missing).
         attrs: root attributes; ``protocol``, ``labels``, ``status``.
@@ -62,8 +68,15 @@ class RunData:
     config: dict
     missing: dict = field(default_factory=dict)
     input_sha256: str = ""
-    dropped_invalid: int = 0
+    dropped: list = field(default_factory=list)
+    valid: np.ndarray | None = None
     baseline_counts: np.ndarray | None = None
+    baseline_uncertainty: np.ndarray | None = None
+
+    @property
+    def dropped_invalid(self) -> int:
+        """Frames removed from the record (every finger unusable, or a bad time stamp)."""
+        return int(sum(d["frames"] for d in self.dropped))
 
     @property
     def protocol(self) -> str | None:
@@ -104,6 +117,61 @@ def is_run_store(path: Path) -> bool:
     return path.is_dir() and (path / "zarr.json").is_file()
 
 
+COUNT_RANGE = (1.0, 4094.0)
+"""Electrode counts a working channel can report (0: shorted, or a chunk read back as zeros;
+4095: saturated, an impedance of 0 kΩ)."""
+
+MAX_BACKWARD_FRACTION = 0.01
+"""A time axis that goes backwards at more than this fraction of its steps (shuffled) is not trusted."""
+
+
+def screen_frames(path, time, electrodes, pdc, stored_valid):
+    """Check the time axis and each finger's samples; drop what no finger can use.
+
+    Returns ``(time, electrodes, pdc, valid, dropped)``: frames kept, the (T, F) validity of
+    each finger's samples, and the list of what was dropped and why. A time axis that goes
+    backwards at more than :data:`MAX_BACKWARD_FRACTION` of its steps (shuffled or
+    overwritten) is an :class:`AnalysisInputError`: no part of such a record can be trusted
+    to be in order. A few backward or repeated stamps drop those frames.
+    """
+    dropped = []
+    n = len(time)
+    finite_t = np.isfinite(time)
+    if n > 1:
+        steps = np.diff(np.where(finite_t, time, -np.inf))
+        backward = int(np.count_nonzero(steps[np.isfinite(steps)] < 0))
+        if backward > max(1, MAX_BACKWARD_FRACTION * (n - 1)):
+            first = int(np.flatnonzero(np.isfinite(steps) & (steps < 0))[0]) + 1
+            raise AnalysisInputError(f"{path}: biotac/time goes backwards at {backward} of {n - 1} steps "
+                                     f"(first at frame {first}); the record's order cannot be trusted")
+    keep = finite_t.copy()
+    if not finite_t.all():
+        dropped.append({"what": "frames", "frames": int((~finite_t).sum()), "reason": "time stamp not finite"})
+    # a stamp must exceed every earlier kept stamp: a backward step drops the frames up to the next later one
+    running = np.maximum.accumulate(np.where(finite_t, time, -np.inf))
+    late = np.r_[False, time[1:] <= running[:-1]] & finite_t
+    if late.any():
+        dropped.append({"what": "frames", "frames": int(late.sum()),
+                        "reason": "time stamp not after the previous frame's (out of order or repeated)"})
+        keep &= ~late
+    lo, hi = COUNT_RANGE
+    valid = np.all((electrodes >= lo) & (electrodes <= hi), axis=2) & stored_valid[:, None]
+    if pdc is not None:
+        valid &= np.isfinite(pdc)
+    none = keep & ~valid.any(axis=1)
+    if none.any():
+        zeros = none & np.all(electrodes == 0, axis=(1, 2))
+        why = ("every electrode of every finger reads 0 (a deleted or unreadable chunk read back as zeros)"
+               if zeros.sum() == none.sum() else "no finger has all 24 electrodes within 1..4094 counts")
+        dropped.append({"what": "frames", "frames": int(none.sum()), "reason": why})
+        keep &= ~none
+    time, electrodes, valid = time[keep], electrodes[keep], valid[keep]
+    pdc = pdc[keep] if pdc is not None else None
+    if len(time) < 2:
+        raise AnalysisInputError(f"{path}: the run store holds {len(time)} valid tactile frame(s); nothing to analyse")
+    return time, electrodes, pdc, valid, dropped
+
+
 def load_run(path) -> RunData:
     """Open ``path`` (a ``run.zarr``) and read what the analysis needs.
 
@@ -134,21 +202,9 @@ def load_run(path) -> RunData:
     fingers = [str(f) for f in b["finger"].values]
     pdc = np.asarray(b["pdc"].values, float) if "pdc" in b else None
     baseline_counts = np.asarray(b["baseline"].values, float) if "baseline" in b else None
-    keep = np.ones(len(time), bool)
-    if "valid" in b:
-        keep &= np.asarray(b["valid"].values, bool)
-    keep &= np.all((electrodes >= 1) & (electrodes <= 4095), axis=(1, 2)) & np.isfinite(time)
-    if pdc is not None:
-        keep &= np.all(np.isfinite(pdc), axis=1)
-    if keep.size and len(time) > 1:
-        order_ok = np.r_[True, np.diff(time) > 0]
-        keep &= order_ok
-    dropped = int((~keep).sum())
-    time, electrodes = time[keep], electrodes[keep]
-    pdc = pdc[keep] if pdc is not None else None
-    if len(time) < 2:
-        raise AnalysisInputError(f"{path}: the run store holds {len(time)} valid tactile frame(s); nothing to analyse")
-
+    baseline_unc = np.asarray(b["baseline_uncertainty"].values, float) if "baseline_uncertainty" in b else None
+    stored_valid = np.asarray(b["valid"].values, bool) if "valid" in b else np.ones(len(time), bool)
+    time, electrodes, pdc, valid, dropped = screen_frames(path, time, electrodes, pdc, stored_valid)
     missing = {}
     arm_time = tcp_pose = tcp_speed = None
     if "arm" in groups:
@@ -188,8 +244,8 @@ def load_run(path) -> RunData:
     h.update(json.dumps([events.kind, events.name], sort_keys=True).encode())
     return RunData(path=path, time=time, fingers=fingers, electrodes=electrodes, pdc=pdc, arm_time=arm_time,
                    tcp_pose=tcp_pose, tcp_speed=tcp_speed, events=events, attrs=attrs, config=config,
-                   missing=missing, input_sha256=h.hexdigest(), dropped_invalid=dropped,
-                   baseline_counts=baseline_counts)
+                   missing=missing, input_sha256=h.hexdigest(), dropped=dropped, valid=valid,
+                   baseline_counts=baseline_counts, baseline_uncertainty=baseline_unc)
 
 
 def open_truth(path):

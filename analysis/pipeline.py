@@ -12,16 +12,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tactile import aggregate as tagg
+from tactile import contact as tcontact
 from tactile import signals
 
 from . import estimates as est
 from . import flows as fl
 from . import labels as lab
 from . import segments as seg
+from . import slip as slp
 from .load import RunData
 from .preprocess import Prepared, prepare
 
 _MODELS: dict = {}
+EDGE_REACH_S = 0.2
+"""How far (s) a contact's edge may move from where the smoothed score put it (tactile.contact.refine_edges)."""
 
 
 def get_model(tactile_config):
@@ -51,13 +55,23 @@ class Analysis:
     pour: dict                           # pour estimates (onsets in s per finger and overall)
     whole_run: list                      # rows: finger, view, kind, values
     flows: list                          # [fl.ContactFlow]
+    contact_method: str = "pressure"     # how contacts were found: pressure | pattern
+    slips: dict = field(default_factory=dict)   # segment id → slip estimate (analysis.slip.estimate)
     timing: dict = field(default_factory=dict)
+
+
+def contact_method(prepared: Prepared, cfg) -> str:
+    """``analysis.contact.method`` resolved: ``auto`` is the pressure after a tare, the electrode
+    pattern otherwise (no rest stretch to measure a pressure's noise on, or none at all)."""
+    if cfg.contact.method != "auto":
+        return cfg.contact.method
+    return "pressure" if prepared.baseline.kind == "tare" else "pattern"
 
 
 def _threshold(prepared: Prepared, k: int, cfg) -> float:
     s = cfg.segmentation
     floor = s.contact_min_pdc if prepared.pressure_name == "pdc" else s.contact_min_proxy
-    if prepared.baseline_source != "tare":
+    if prepared.baseline.kind != "tare":
         # without a tare the rest level is only known up to the sensor's drift over the record
         floor *= cfg.baseline_fallback_contact_min / s.contact_min_pdc
     return max(s.contact_threshold_sigma * float(prepared.rest_noise[k]), floor)
@@ -78,12 +92,29 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
     if run.status not in ("success", "unknown"):
         skipped.append({"what": "run", "reason": f"run status is {run.status!r}: only the recorded part "
                                                  f"({run.time[-1]:.2f} s) is analysed"})
+    for f, why in prepared.unusable.items():
+        skipped.append({"what": "finger", "finger": f, "reason": f"not analysed: {why}"})
+    for f, n in prepared.repaired.items():
+        skipped.append({"what": "samples", "finger": f, "frames": n,
+                        "reason": "electrodes outside 1..4094 counts in these frames: bridged by interpolation"})
+    for d in run.dropped:
+        skipped.append({**d, "what": f"{d['frames']} {d['what']}"})
     scheme = lab.scheme(run.labels)
+    method = contact_method(prepared, cfg)
+    signal = np.zeros_like(prepared.pressure)
     contacts, thresholds, extrema, bumps = {}, {}, {}, {}
     for k, f in enumerate(run.fingers):
+        if f in prepared.unusable:
+            continue
         p = seg.smooth(prepared.pressure[:, k], rate, s.smooth_s)
-        thr = _threshold(prepared, k, cfg)
-        ivs = seg.contact_intervals(p, thr, rate, s.min_contact_s, s.merge_gap_s)
+        if method == "pattern":
+            signal[:, k], thr = prepared.score[:, k], cfg.contact.threshold_sigma
+        else:
+            signal[:, k], thr = p, _threshold(prepared, k, cfg)
+        ivs = seg.contact_intervals(signal[:, k], thr, rate, s.min_contact_s, s.merge_gap_s)
+        if method == "pattern":
+            reach = int(round(EDGE_REACH_S * rate))
+            ivs = tcontact.refine_edges(ivs, prepared.fine_score[:, k], thr, reach)
         if not ivs:
             continue
         contacts[f], thresholds[f] = ivs, thr
@@ -104,8 +135,12 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
             bumps[f] = [[seg.replateau(ws, ps, b, s.plateau_level) for b in bl] for bl in bumps[f]]
 
     margin = int(round(s.margin_s * rate))
-    flows, flow_s = fl.compute(prepared, contacts, run.fingers, model, margin, thresholds, s.settle_frames,
-                               keep_fields=cfg.save_fields, progress=cfg.progress)
+    plan = fl.FlowPlan(primary=fl.primary_reference(cfg.reference, prepared.baseline.kind),
+                       reference_frame=None if cfg.reference_time_s is None else
+                       int(np.searchsorted(run.time, cfg.reference_time_s)),
+                       evidence_views=tuple(cfg.slip.views), intensity=cfg.intensity)
+    flows, flow_s = fl.compute(prepared, contacts, run.fingers, model, margin, signal, thresholds, s.settle_frames,
+                               plan, keep_fields=cfg.save_fields, progress=cfg.progress)
     t_flow = _time.perf_counter()
 
     segments: list[lab.Segment] = []
@@ -131,6 +166,12 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
         sg.id = i
 
     aggregates = _segment_aggregates(run, prepared, kept, flows, model, rate, skipped)
+    slips = {}
+    for sg in kept:
+        est_ = slp.estimate(fl.find(flows, sg.finger, sg.start, sg.stop),
+                            prepared.activation[:, run.fingers.index(sg.finger)], sg.start, sg.stop, model, cfg.slip)
+        if est_ is not None:
+            slips[sg.id] = est_
     crossings = _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) if scheme == lab.SWEEP else []
     whole = _whole_run(flows, model, rate)
     t_end = _time.perf_counter()
@@ -139,7 +180,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
               "frames_processed": int(sum(cf.window[1] - cf.window[0] for cf in flows)) * len(model.plans),
               "frames_total": T * len(run.fingers) * len(model.plans)}
     return Analysis(run, prepared, scheme, contacts, thresholds, extrema, bumps, kept, skipped, aggregates,
-                    crossings, pour, whole, flows, timing)
+                    crossings, pour, whole, flows, method, slips, timing)
 
 
 # ----------------------------------------------------------------------------- aggregates

@@ -131,7 +131,7 @@ def to_datatree(a: Analysis, views: list[str], attrs: dict, fields: bool = False
                                "angle between the feature's ridge and the direction of motion")},
         coords={"crossing": np.arange(m, dtype=np.int64), "axis3": np.array(["x", "y", "z"], dtype=str)})
     tree = {"/": xr.Dataset(attrs=attrs), "/segments": seg_ds, "/aggregates": agg_ds, "/whole_run": whole_ds,
-            "/estimates/crossings": cr_ds}
+            "/estimates/crossings": cr_ds, "/estimates/slip": slip_dataset(a)}
     if a.pour:
         phases = list(a.pour["onsets"])
         tree["/estimates/pour"] = xr.Dataset(
@@ -152,6 +152,48 @@ def to_datatree(a: Analysis, views: list[str], attrs: dict, fields: bool = False
                                         "static flow (col, row)")
                 tree[f"/fields/{cf.finger}_{i}_{v}"] = ds
     return xr.DataTree.from_dict(tree)
+
+
+EVIDENCE = ("static_unloaded", "static_onset", "dynamic", "cop_unloaded", "cop_onset")
+
+
+def slip_dataset(a: Analysis):
+    """``/estimates/slip`` (segment): the slip estimate of every segment that has one, with the
+    evidence vectors beside it (see :mod:`analysis.slip`)."""
+    import xarray as xr
+    ids = sorted(a.slips)
+    rows = [a.slips[i] for i in ids]
+    num = lambda k: np.array([np.nan if r[k] is None else r[k] for r in rows], float)  # noqa: E731
+    ev = np.full((len(rows), len(EVIDENCE), 2), np.nan)
+    ev_rot = np.full((len(rows), 2), np.nan)
+    for i, r in enumerate(rows):
+        for j, name in enumerate(EVIDENCE):
+            v = r["evidence"].get(name, {}).get("vector_mm")
+            if v is not None:
+                ev[i, j] = v
+        for j, name in enumerate(("static_onset", "dynamic")):
+            rot = r["evidence"].get(name, {}).get("rotation_deg")
+            ev_rot[i, j] = np.nan if rot is None else rot
+    return xr.Dataset(
+        {"slip_class": _var(np.array([r["slip_class"] or "" for r in rows], dtype=str), ("segment",), "",
+                            "translation | rotation | none (touch)"),
+         "slip_direction_sensor": _var(num("slip_direction_sensor_deg"), ("segment",), "degree",
+                                       "direction the object moves relative to the finger (0 = +x, 90 = +y)"),
+         "slip_displacement": _var(num("slip_displacement_mm"), ("segment",), "mm",
+                                   "displacement of the contact pattern from its reference (tactile flow)"),
+         "rotation": _var(num("rotation_deg"), ("segment",), "degree",
+                          "rotation of the pattern about the pad normal, + counter-clockwise seen from outside"),
+         "confidence": _var(num("confidence"), ("segment",), "1", "confidence of slip_class"),
+         "direction_agreement": _var(num("direction_agreement"), ("segment",), "1",
+                                     "agreement of the direction evidence (1: all agree)"),
+         "reference": _var(np.array([r["reference"] for r in rows], dtype=str), ("segment",), "",
+                           "reference of the displacement: contact_onset | unloaded"),
+         "evidence": _var(ev, ("segment", "source", "axis2"), "mm", "evidence vectors, sensor x-y"),
+         "evidence_rotation": _var(ev_rot, ("segment", "rotation_source"), "degree",
+                                   "rotation evidence: static flow from the onset, dynamic flow summed")},
+        coords={"segment": np.array(ids, dtype=np.int64), "source": np.array(EVIDENCE, dtype=str),
+                "axis2": np.array(["x", "y"], dtype=str),
+                "rotation_source": np.array(["static_onset", "dynamic"], dtype=str)})
 
 
 def write_store(tree, path: Path) -> None:

@@ -68,6 +68,10 @@ def _headline(a, score: dict | None) -> dict:
     if a.pour:
         for k, v in a.pour["onsets"].items():
             h[f"onset_{k}_s"] = v
+    slips = whole_contact_slips(a)
+    if slips:
+        h["slip"] = {f: {k: e[k] for k in ("slip_class", "slip_direction_sensor_deg", "slip_displacement_mm",
+                                           "rotation_deg", "confidence")} for f, e in slips.items()}
     if score:
         s = score["summary"]
         for k in ("direction_correct_fraction", "width_error_mm_median", "boundary_error_ms_median",
@@ -76,6 +80,17 @@ def _headline(a, score: dict | None) -> dict:
                 h[f"score_{k}"] = s[k]
         h["score_all_targets_met"] = score.get("all_targets_met")
     return h
+
+
+def whole_contact_slips(a) -> dict:
+    """Finger → the slip estimate of its whole contact: the ``all`` segment (imported records and
+    other generic protocols), else its longest ``contact`` segment; fingers without either are left out."""
+    out = {}
+    for label in ("contact", "all"):
+        for sg in sorted(a.segments, key=lambda x: x.frames()):
+            if sg.label == label and sg.id in a.slips:
+                out[sg.finger] = a.slips[sg.id]
+    return out
 
 
 def _segments_json(a) -> list[dict]:
@@ -88,7 +103,7 @@ def _segments_json(a) -> list[dict]:
         out.append({"id": sg.id, "label": sg.label, "finger": sg.finger, "feature": sg.feature,
                     "start_s": float(t[sg.start]), "end_s": float(t[min(sg.stop, len(t) - 1)]),
                     "frames": sg.frames(), "cop_mm": r.get("cop"), "cop_displacement_mm": r.get("cop_displacement"),
-                    "flow": flows})
+                    "slip": a.slips.get(sg.id), "flow": flows})
     return out
 
 
@@ -114,7 +129,8 @@ def analyze_run(store_path, analysis_cfg=None, *, console=print) -> dict:
                   "input": {"store": store_path.name, "run_id": run.attrs.get("run_id"),
                             "sha256": run.input_sha256, "frames": len(run.time),
                             "dropped_invalid_frames": run.dropped_invalid},
-                  "baseline": a.prepared.baseline_source, "pressure_signal": a.prepared.pressure_name}
+                  "baseline": a.prepared.baseline_source, "baseline_kind": a.prepared.baseline.kind,
+                  "contact_method": a.contact_method, "pressure_signal": a.prepared.pressure_name}
     score = None
     truth = open_truth(store_path)
     if truth is not None:
@@ -125,7 +141,9 @@ def analyze_run(store_path, analysis_cfg=None, *, console=print) -> dict:
                "headline": _headline(a, score), "provenance": provenance,
                "contacts": {f: [[float(run.time[s]), float(run.time[min(e, len(run.time) - 1)])] for s, e in ivs]
                             for f, ivs in a.contacts.items()},
-               "segments": _segments_json(a), "estimates": {"crossings": a.crossings, "pour": a.pour},
+               "begins_in_contact": {f: ivs[0][0] == 0 for f, ivs in a.contacts.items()},
+               "segments": _segments_json(a),
+               "estimates": {"crossings": a.crossings, "pour": a.pour, "slip": whole_contact_slips(a)},
                "whole_run": a.whole_run, "skipped": a.skipped, "timing": a.timing}
     staging = run_dir / f".analysis-staging-{analysis_id[:8]}"
     staging.mkdir()

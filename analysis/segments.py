@@ -14,13 +14,14 @@ from scipy.signal import find_peaks, savgol_filter
 
 
 def smooth(signal, rate_hz: float, window_s: float) -> np.ndarray:
-    """Savitzky–Golay (quadratic) smoothing over ``window_s`` seconds (odd ≥ 5 samples)."""
+    """Savitzky–Golay (quadratic) smoothing along the first axis (time) over ``window_s``
+    seconds (odd ≥ 5 samples)."""
     x = np.asarray(signal, float)
     n = int(round(window_s * rate_hz)) | 1
     n = max(n, 5)
     if len(x) < n:
         return x.copy()
-    return savgol_filter(x, n, 2)
+    return savgol_filter(x, n, 2, axis=0)
 
 
 def contact_intervals(pressure, threshold: float, rate_hz: float, min_s: float = 0.1,

@@ -114,10 +114,11 @@ class TactileModel:
         """Activation frames (T, H, W) float32 [kΩ] of one view for (T, 24) activation."""
         return self._render(activation, view, None)
 
-    def render_uint8(self, activation, view: str) -> np.ndarray:
-        """``to_uint8(render(activation, view))``, the 8-bit frames (T, H, W) the flow sees.
+    def render_uint8(self, activation, view: str, intensity_range=None) -> np.ndarray:
+        """``to_uint8(render(activation, view))``, the 8-bit frames (T, H, W) the flow sees, with
+        ``intensity_range`` (low, high) kΩ mapped to 0..255 (default: the config's).
         The exact renderer writes them directly (no float frames in between)."""
-        return self._render(activation, view, self.config.intensity_range)
+        return self._render(activation, view, intensity_range or self.config.intensity_range)
 
     def _render(self, activation, view, intensity_range):
         plan = self.plans[view]
@@ -134,6 +135,10 @@ class TactileModel:
         return frames.to_uint8(frames_kohm, low, high)
 
 
+UNLOADED = "unloaded"
+"""Name of the static-flow reference that is the sensor at rest: zero activation, an empty frame."""
+
+
 @dataclass
 class ViewResult:
     """Flow of one finger in one view.
@@ -141,29 +146,56 @@ class ViewResult:
     Attributes:
         frames: (T, H, W) uint8 tactile frames.
         dynamic: aggregates of the dynamic flow, px/frame (``dynamic.mean[0]`` is zero).
-        static: aggregates of the static flow from ``reference``, px, or ``None``.
-        reference: index of the static-flow reference frame, or ``None``.
-        dynamic_field, static_field: (T, H, W, 2) float32 flow fields if requested.
+        statics: reference name → aggregates of the static flow from that reference, px.
+        references: reference name → frame index, or ``None`` for :data:`UNLOADED`.
+        primary: the name of the reference :attr:`static` and :attr:`reference` report.
+        intensity_range: (low, high) kΩ mapped to 0..255 in ``frames``.
+        dynamic_field, static_field: (T, H, W, 2) float32 flow fields if requested
+            (``static_field``: from the primary reference).
     """
 
     frames: np.ndarray
     dynamic: aggregate.FlowAggregates
-    static: aggregate.FlowAggregates | None
-    reference: int | None
+    statics: dict = field(default_factory=dict)
+    references: dict = field(default_factory=dict)
+    primary: str | None = None
+    intensity_range: tuple[float, float] = (0.0, 8.0)
     dynamic_field: np.ndarray | None = None
     static_field: np.ndarray | None = None
 
+    @property
+    def static(self) -> aggregate.FlowAggregates | None:
+        """Aggregates of the static flow from the primary reference, or ``None``."""
+        return self.statics.get(self.primary)
 
-def process_view(model: TactileModel, activation, view: str, reference: int | None = None,
+    @property
+    def reference(self) -> int | None:
+        """Frame index of the primary reference (``None`` for the unloaded one or none)."""
+        return self.references.get(self.primary)
+
+
+def process_view(model: TactileModel, activation, view: str, reference: int | None = None, *,
+                 references: dict | None = None, primary: str | None = None, intensity_range=None,
                  keep_fields: bool = False, progress=None) -> ViewResult:
     """Frames, dynamic and static flow, and their aggregates for one finger and one view.
+
+    >>> import numpy as np
+    >>> model = TactileModel.build(TactileConfig(views=("bottom",), size=(20, 28)))
+    >>> act = np.zeros((3, 24)); act[:, 23] = [0.0, 2.0, 2.0]        # taxel 24 pressed
+    >>> r = process_view(model, act, "bottom", references={"unloaded": None}, primary="unloaded")
+    >>> r.frames.shape, r.static.magnitude.shape
+    ((3, 20, 28), (3,))
 
     Args:
         model: the precomputed model.
         activation: (T, 24) smoothed activation of one finger, kΩ.
         view: a name in ``model.plans``.
-        reference: frame index for the static flow (see :func:`tactile.flow.contact_reference`);
-            ``None`` skips the static flow.
+        reference: a frame index for one static flow (named ``"reference"``); kept for
+            callers of one reference, same as ``references={"reference": i}``.
+        references: name → frame index, or ``None`` for the unloaded sensor (an empty frame:
+            zero activation): one static flow per entry.
+        primary: the reference :attr:`ViewResult.static` reports (default: the first).
+        intensity_range: (low, high) kΩ mapped to 0..255 (default: the config's).
         keep_fields: also return the full (T, H, W, 2) flow fields.
         progress: optional callable taking the number of frames just processed.
     """
@@ -172,23 +204,31 @@ def process_view(model: TactileModel, activation, view: str, reference: int | No
         raise ValueError(f"view: expected one of {sorted(model.plans)}, got {view!r}")
     c = model.config
     n = len(activation)
-    if reference is not None and not 0 <= reference < n:
-        raise ValueError(f"reference: expected a frame index in [0, {n}), got {reference}")
+    refs = dict(references or {})
+    if reference is not None:
+        refs["reference"] = reference
+    for name, index in refs.items():
+        if index is not None and not 0 <= index < n:
+            raise ValueError(f"reference {name}: expected a frame index in [0, {n}), got {index}")
     plan = model.plans[view]
+    rng = tuple(intensity_range or c.intensity_range)
     u8 = np.empty((n,) + plan.shape, np.uint8)
     for start in range(0, n, c.chunk):
         stop = min(n, start + c.chunk)
-        u8[start:stop] = model.render_uint8(activation[start:stop], view)
+        u8[start:stop] = model.render_uint8(activation[start:stop], view, rng)
         if progress:
             progress(stop - start)
 
     dyn = flow.dynamic_flow(u8, c.flow)
-    result = ViewResult(frames=u8, dynamic=aggregate.aggregate_flow(dyn, plan.mask, c.noise),
-                        static=None, reference=reference, dynamic_field=dyn if keep_fields else None)
-    if reference is not None:
-        sta = flow.static_flow(u8, reference, c.flow)
-        result.static = aggregate.aggregate_flow(sta, plan.mask, c.noise)
-        result.static_field = sta if keep_fields else None
+    primary = primary if primary is not None else next(iter(refs), None)
+    result = ViewResult(frames=u8, dynamic=aggregate.aggregate_flow(dyn, plan.mask, c.noise), references=refs,
+                        primary=primary, intensity_range=rng, dynamic_field=dyn if keep_fields else None)
+    for name, index in refs.items():
+        ref = np.zeros(plan.shape, np.uint8) if index is None else index
+        sta = flow.static_flow(u8, ref, c.flow)
+        result.statics[name] = aggregate.aggregate_flow(sta, plan.mask, c.noise)
+        if keep_fields and name == primary:
+            result.static_field = sta
     return result
 
 
