@@ -90,9 +90,17 @@ def warm_up(model: TactileModel, views) -> None:
 
 def tactile_config(analysis: dict, views) -> TactileConfig:
     """The online pipeline's parameters: the analysis config's ``tactile`` and ``flow``
-    (so live and offline frames are the same), the live ``views``, and no smoother."""
+    (so live and offline frames are the same), the live ``views``, and no smoother.
+
+    A live stream cannot scale each contact to its own peak before the contact has ended:
+    with ``intensity_range: contact`` (the offline default) the live frames keep the fixed
+    0–8 kΩ scale the slip detector was tuned on. The static-flow reference keys are the
+    offline analysis's own."""
     tk = dict(analysis.get("tactile") or {})
-    fk = {k: v for k, v in dict(analysis.get("flow") or {}).items() if k not in ("dis", "tvl1")}
+    if isinstance(tk.get("intensity_range"), str):
+        tk.pop("intensity_range")
+    fk = {k: v for k, v in dict(analysis.get("flow") or {}).items()
+          if k not in ("dis", "tvl1", "reference", "reference_time_s")}
     known = {f.name for f in fields(TactileConfig)}
     unknown = sorted(set(tk) - known)
     if unknown:
