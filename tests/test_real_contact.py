@@ -215,3 +215,71 @@ def test_summary_reports_the_baseline_and_how_sure(in_contact_import):
     assert "uncertain by" in s["provenance"]["baseline"]
     assert s["provenance"]["contact_method"] == "pattern"
     json.dumps(s)
+
+
+def _rewrite_store(src: Path, dst: Path, edit) -> Path:
+    """A copy of the run store ``src`` with its arrays edited by ``edit(dict of datasets)``."""
+    import warnings
+
+    import xarray as xr
+    tree = xr.open_datatree(str(src), engine="zarr").load()
+    d = edit({node.path: node.to_dataset() for node in tree.subtree})
+    dst.mkdir()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        xr.DataTree.from_dict(d).to_zarr(str(dst / "run.zarr"), zarr_format=3, consolidated=True)
+    return dst / "run.zarr"
+
+
+@pytest.fixture(scope="module")
+def pressed_store(rest, tmp_path_factory):
+    """The real resting recording with ff pressed from 3 to 5 s, imported (no tare)."""
+    tmp = tmp_path_factory.mktemp("pressed")
+
+    def edit(c):
+        c[300:500, 0, 20:24] -= 400
+    (res,) = import_source(_csv_of(rest, tmp / "hand.csv", edit), tmp / "out", ImportSettings(rate_hz=100.0))
+    return Path(res.store)
+
+
+def test_shuffled_time_axis_is_refused(pressed_store, tmp_path):
+    from analysis.load import AnalysisInputError
+
+    def shuffle(d):
+        b = d["/biotac"]
+        t = b["time"].values.copy()
+        np.random.default_rng(0).shuffle(t)
+        d["/biotac"] = b.assign_coords(time=t)
+        return d
+    with pytest.raises(AnalysisInputError, match="goes backwards at .* steps"):
+        load_run(_rewrite_store(pressed_store, tmp_path / "s", shuffle))
+
+
+def test_a_chunk_read_back_as_zeros_is_dropped_and_said(pressed_store, tmp_path, model):
+    """A deleted chunk reads back as zeros (time and counts): those frames are dropped, named in
+    ``skipped``, and the rest is analysed as before."""
+    def zero_chunk(d):
+        b = d["/biotac"]
+        t = b["time"].values.copy()
+        e = b["electrodes"].values.copy()
+        t[600:700], e[600:700] = 0.0, 0
+        d["/biotac"] = b.assign_coords(time=t).assign(electrodes=(b["electrodes"].dims, e, b["electrodes"].attrs))
+        return d
+    run = load_run(_rewrite_store(pressed_store, tmp_path / "z", zero_chunk))
+    assert len(run.time) == 877 and run.dropped_invalid == 100
+    a = analyse(run, CFG, model)
+    assert any("out of order or repeated" in s["reason"] and s["frames"] == 100 for s in a.skipped)
+    (start, stop), = a.contacts["ff"]
+    assert abs(run.time[start] - 3.0) < 0.05 and abs(run.time[stop - 1] - 5.0) < 0.05
+
+
+def test_electrodes_stuck_at_full_scale_set_the_finger_aside(pressed_store, tmp_path, model):
+    def stuck(d):
+        b = d["/biotac"]
+        e = b["electrodes"].values.copy()
+        e[:, 1, 3] = 4095                                       # mf's taxel 4 saturated throughout
+        d["/biotac"] = b.assign(electrodes=(b["electrodes"].dims, e, b["electrodes"].attrs))
+        return d
+    a = analyse(load_run(_rewrite_store(pressed_store, tmp_path / "st", stuck)), CFG, model)
+    assert "taxel(s) 4 outside 1..4094 counts throughout" in a.prepared.unusable["mf"]
+    assert list(a.contacts) == ["ff"]
