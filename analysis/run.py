@@ -75,7 +75,8 @@ def _headline(a, score: dict | None) -> dict:
     if score:
         s = score["summary"]
         for k in ("direction_correct_fraction", "width_error_mm_median", "boundary_error_ms_median",
-                  "slip_onset_error_ms"):
+                  "slip_onset_error_ms", "slip_direction_correct_fraction", "rotation_sense_correct_fraction",
+                  "touch_vs_slip_correct_fraction", "slip_class_correct_fraction"):
             if s.get(k) is not None:
                 h[f"score_{k}"] = s[k]
         h["score_all_targets_met"] = score.get("all_targets_met")

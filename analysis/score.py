@@ -17,7 +17,12 @@ Scores:
 - boundaries (ms): ``before`` start vs the truth contact start, ``after`` end vs the contact
   end, ``during`` start/end vs the times the pad's lowest point passes the feature's edges
   (centre_time ∓ width / 2 / speed); pour phase onsets vs the truth onsets;
-- slip onset (ms): the ``initial_slip`` onset vs the truth ``slip_onset``.
+- slip onset (ms): the ``initial_slip`` onset vs the truth ``slip_onset``;
+- object motions under a still finger (``truth/object_motions``, the slip-in-place protocol):
+  each motion against the slip estimate of the finger's ``contact`` segment that overlaps it
+  most: a translation's direction within 45° (``SLIP_DIRECTION_OK_DEG``) and classed
+  ``translation``; a rotation's sense (the sign of ``rotation_deg``) and classed ``rotation``;
+  touch vs slip (classed ``none`` exactly when the object was only touched); contact found.
 """
 
 from __future__ import annotations
@@ -31,6 +36,9 @@ from . import estimates as est
 TARGETS = {"direction_correct_fraction": 1.0, "width_error_mm_median": 1.0, "boundary_error_ms_median": 50.0,
            "slip_onset_error_ms": 100.0}
 DIRECTION_OK_DEG = 30.0
+SLIP_DIRECTION_OK_DEG = 45.0
+SLIP_TARGETS = {"slip_direction_correct_fraction": 1.0, "rotation_sense_correct_fraction": 1.0,
+                "touch_vs_slip_correct_fraction": 1.0, "contact_found_fraction": 1.0}
 
 
 def _s(x):
@@ -162,7 +170,14 @@ def score(analysis, truth: dict) -> dict:
          "boundary_error_ms_median": float(np.median(boundary_ms)) if boundary_ms else None,
          "boundary_error_ms_max": float(np.max(boundary_ms)) if boundary_ms else None,
          "slip_onset_error_ms": slip_err}
+    motions = _object_motions(analysis, truth, t0)
+    if motions is not None:
+        out["object_motions"], summary = motions
+        s.update(summary)
     out["summary"] = s
+    for key, limit in SLIP_TARGETS.items():
+        if s.get(key) is not None:
+            out["targets"][key] = {"target": limit, "value": s[key], "met": s[key] >= limit}
     for key, limit in TARGETS.items():
         v = s.get(key)
         applicable = not (key == "slip_onset_error_ms" and not analysis.pour) and \
@@ -177,6 +192,54 @@ def score(analysis, truth: dict) -> dict:
             out["targets"][key] = {"target": limit, "value": v, "met": abs(v) <= limit}
     out["all_targets_met"] = all(t["met"] for t in out["targets"].values()) if out["targets"] else None
     return out
+
+
+def _object_motions(analysis, truth: dict, t0: float):
+    """Rows and summary of the object motions (module doc), or ``None`` without any."""
+    om = truth.get("object_motions") or {}
+    kinds = [_s(k) for k in np.atleast_1d(om.get("kind", []))]
+    if not kinds:
+        return None
+    time = analysis.run.time
+    rows = []
+    for i, kind in enumerate(kinds):
+        finger = _s(om["finger"][i])
+        start, end = float(om["start"][i]) - t0, float(om["end"][i]) - t0
+        row = {"kind": kind, "finger": finger, "start": start, "end": end,
+               "true_direction_sensor_deg": float(om["direction_sensor_deg"][i]),
+               "true_rotation_deg": float(om["rotation_deg"][i])}
+        best, overlap = None, 0.0
+        for sg in analysis.segments:
+            if sg.finger == finger and sg.label == "contact" and sg.id in analysis.slips:
+                o = min(end, _seg_end(time, sg)) - max(start, float(time[sg.start]))
+                if o > overlap:
+                    best, overlap = sg, o
+        row["contact_found"] = best is not None
+        if best is not None:
+            e = analysis.slips[best.id]
+            row.update(segment=best.id, slip_class=e["slip_class"], direction_deg=e["slip_direction_sensor_deg"],
+                       rotation_deg=e["rotation_deg"], displacement_mm=e["slip_displacement_mm"])
+            row["touch_vs_slip_correct"] = (e["slip_class"] == "none") == (kind == "none")
+            if kind == "translate" and e["slip_direction_sensor_deg"] is not None:
+                err = abs((e["slip_direction_sensor_deg"] - row["true_direction_sensor_deg"] + 180.0) % 360.0 - 180.0)
+                row["direction_error_deg"] = err
+                row["direction_correct"] = bool(err <= SLIP_DIRECTION_OK_DEG)
+            if kind == "rotate":
+                rot = e["rotation_deg"]
+                row["rotation_sense_correct"] = bool(rot is not None and rot != 0
+                                                     and math.copysign(1.0, rot) == math.copysign(1.0, row["true_rotation_deg"]))
+            row["class_correct"] = e["slip_class"] == {"translate": "translation", "rotate": "rotation"}.get(kind, "none")
+        rows.append(row)
+
+    def frac(key, kind=None):
+        vals = [r.get(key, False) for r in rows if kind is None or r["kind"] == kind]
+        return float(np.mean(vals)) if vals else None
+    summary = {"object_motions": len(rows), "contact_found_fraction": frac("contact_found"),
+               "slip_direction_correct_fraction": frac("direction_correct", "translate"),
+               "rotation_sense_correct_fraction": frac("rotation_sense_correct", "rotate"),
+               "touch_vs_slip_correct_fraction": frac("touch_vs_slip_correct"),
+               "slip_class_correct_fraction": frac("class_correct")}
+    return rows, summary
 
 
 def _seg_end(time, sg) -> float:
