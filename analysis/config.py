@@ -35,6 +35,7 @@ class Segmentation:
     plateau_level: float = 0.5
     margin_s: float = 0.2
     settle_frames: int = 10
+    load_fraction: float = 0.8
 
 
 @dataclass(frozen=True)
@@ -59,8 +60,8 @@ class Contact:
 
 @dataclass(frozen=True)
 class Slip:
-    min_displacement_mm: float = 0.5
-    min_rotation_deg: float = 3.0
+    min_displacement_mm: float = 1.5
+    min_rotation_deg: float = 0.75
     views: tuple = ("bottom",)
 
 
@@ -213,6 +214,9 @@ def load_config(node=None) -> AnalysisConfig:
     if not 0 < seg.plateau_level < 1:
         raise AnalysisConfigError(f"analysis.segmentation.plateau_level: expected a fraction in (0, 1), "
                                   f"got {seg.plateau_level}")
+    if not 0 < seg.load_fraction <= 1:
+        raise AnalysisConfigError(f"analysis.segmentation.load_fraction: expected a fraction in (0, 1], "
+                                  f"got {seg.load_fraction}")
     if seg.settle_frames < 1:
         raise AnalysisConfigError(f"analysis.segmentation.settle_frames: expected an integer ≥ 1, got {seg.settle_frames}")
     est = _section(Estimates, "estimates", d.get("estimates") or {})

@@ -4,9 +4,12 @@ For each contact window [start − margin, stop + margin) of a finger and each c
 :func:`tactile.pipeline.process_view` renders the frames and computes the dynamic flow and
 the static flow from the run's primary reference (``analysis.flow.reference``):
 
-- ``contact_onset``: the frame where the contact became established
-  (:func:`tactile.flow.contact_reference` on the contact signal) — the default of a run with a
-  tare, whose contacts begin inside the record;
+- ``contact_onset``: the frame where the contact became established: settled above its
+  threshold (:func:`tactile.flow.contact_reference` on the contact signal) and loaded to
+  ``segmentation.load_fraction`` of its median load (:func:`tactile.flow.loaded_reference` on
+  the contact score: the most pressed taxel's change, free of drift and of the far field's
+  rise) — the default of a run with a tare, whose contacts begin inside the record; in a
+  record that begins in contact, its first settled frame;
 - ``unloaded``: the sensor at rest (zero activation, an empty frame) — the default without a
   tare: a record that begins in contact has no onset, and the pattern's offset from the
   unloaded state is what carries a slip's direction there;
@@ -44,7 +47,9 @@ class ContactFlow:
         finger: finger name; ``k``: its index in the run.
         contact: (start, stop) frame indices of the contact itself.
         window: (w0, w1) frames processed (contact plus margins), absolute indices.
-        reference: absolute frame index where the contact became established, or None.
+        reference: absolute frame index where the contact became established (settled and
+            loaded: the static-flow reference ``contact_onset``), or None.
+        settled: absolute frame index where the contact first settled above its threshold.
         begins_in_contact: the record is already in contact at its first frame (there is no
             onset to see: ``reference`` is then only the first settled frame).
         views: view name → :class:`tactile.pipeline.ViewResult` (indices relative to ``w0``).
@@ -55,6 +60,7 @@ class ContactFlow:
     contact: tuple[int, int]
     window: tuple[int, int]
     reference: int | None
+    settled: int | None = None
     begins_in_contact: bool = False
     views: dict[str, ViewResult] = field(default_factory=dict)
 
@@ -68,12 +74,14 @@ class FlowPlan:
 
     ``primary``: ``contact_onset``, ``unloaded`` or ``time``; ``reference_frame``: absolute
     frame of the ``time`` reference; ``evidence_views``: views that get the static flow from
-    every available reference; ``intensity``: ``contact`` or ``fixed``."""
+    every available reference; ``intensity``: ``contact`` or ``fixed``; ``load_fraction``: of
+    the contact's median load, reached at the contact onset."""
 
     primary: str
     reference_frame: int | None = None
     evidence_views: tuple[str, ...] = ()
     intensity: str = "contact"
+    load_fraction: float = 0.8
 
 
 def primary_reference(setting: str, baseline_kind: str) -> str:
@@ -107,10 +115,13 @@ def compute(prepared, contacts: dict[str, list[tuple[int, int]]], fingers: list[
         for f, k, (a, b), (w0, w1) in jobs:
             act = prepared.activation[w0:w1, k]
             try:
-                onset = w0 + tflow.contact_reference(signal[w0:w1, k], threshold[f], settle=min(settle, max(1, b - a)))
+                settled = onset = w0 + tflow.contact_reference(signal[w0:w1, k], threshold[f],
+                                                               settle=min(settle, max(1, b - a)))
+                if a > 0:           # a record that begins in contact begins loaded: its first settled frame
+                    onset = tflow.loaded_reference(prepared.score[:b, k], onset, plan.load_fraction)
             except ValueError:
-                onset = None
-            cf = ContactFlow(f, k, (a, b), (w0, w1), onset, begins_in_contact=a == 0)
+                settled = onset = None
+            cf = ContactFlow(f, k, (a, b), (w0, w1), onset, settled, begins_in_contact=a == 0)
             refs = {UNLOADED: None}
             if onset is not None:
                 refs[ONSET] = onset - w0

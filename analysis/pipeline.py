@@ -138,7 +138,8 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
     plan = fl.FlowPlan(primary=fl.primary_reference(cfg.reference, prepared.baseline.kind),
                        reference_frame=None if cfg.reference_time_s is None else
                        int(np.searchsorted(run.time, cfg.reference_time_s)),
-                       evidence_views=tuple(cfg.slip.views), intensity=cfg.intensity)
+                       evidence_views=tuple(cfg.slip.views), intensity=cfg.intensity,
+                       load_fraction=s.load_fraction)
     flows, flow_s = fl.compute(prepared, contacts, run.fingers, model, margin, signal, thresholds, s.settle_frames,
                                plan, keep_fields=cfg.save_fields, progress=cfg.progress)
     t_flow = _time.perf_counter()
@@ -149,7 +150,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
         for f, ivs in contacts.items():
             segments += lab.sweep_segments(f, T, ivs, bumps[f])
     elif scheme == lab.POUR:
-        pour = _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin)
+        pour = _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin, model)
     else:
         for f, ivs in contacts.items():
             segments += lab.generic_segments(f, T, ivs)
@@ -310,7 +311,7 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
     return out
 
 
-def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dict:
+def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin, model) -> dict:
     """Pour phases per grasp finger (its longest contact) and the run's onsets (median)."""
     rate = run.rate_hz
     pour_event = reaction = None
@@ -329,8 +330,10 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
         rot = np.full(len(run.time), np.nan)
         ref = None
         if cf is not None and cf.reference is not None:
-            ref = cf.reference
-            parts = [cf.views[v].static for v in cf.views if cf.views[v].static is not None]
+            ref = cf.settled
+            # the bottle turns about the pad normal: the views that look along it see that turn
+            parts = [cf.views[v].static for v in cf.views if cf.views[v].static is not None
+                     and abs(model.plans[v].look[2]) > slp.PAD_NORMAL_COS]
             if parts:
                 curl = np.mean([p.curl for p in parts], axis=0) / 2.0
                 rot[cf.window[0]:cf.window[1]] = seg.smooth(curl, rate, 0.5)

@@ -30,21 +30,27 @@ Combination (documented in docs/analysis.md):
 
 - the *reference* is the contact onset when the contact begins inside the record after a
   rest, else the unloaded sensor;
-- ``slip_direction_sensor_deg``: the direction of the sum of unit vectors of the tactile flow
-  from that reference (weight 1; from the unloaded sensor, negated as above), the centre of
-  pressure from that reference (weight 1), and, when they moved more than
-  ``min_displacement_mm``, the dynamic flow (weight 1/2) and — in a record that begins in
-  contact — the static flow from its first settled frame (weight 1/2: the motion seen
-  during the record); the agreement (length of the weighted mean unit vector, 0..1) is
-  reported;
-- ``slip_displacement_mm``: the magnitude of the centre of pressure's displacement from the
-  reference (the flow's own magnitude from an empty frame is not a distance: it is 0.2–0.9
-  of the centre of pressure's, depending on the pattern's width; both are in the evidence);
-- ``slip_class``: ``rotation`` if |rotation| ≥ ``min_rotation_deg``, else ``translation`` if
-  the displacement ≥ ``min_displacement_mm``, else ``none`` (only touched);
-- ``confidence`` (0..1): how far the deciding quantity lies beyond its threshold (saturating
-  at twice the threshold) times, for a translation, the direction's agreement; for ``none``,
-  how far both quantities stay below theirs.
+- ``slip_direction_sensor_deg``: the direction of the weighted sum of the displacement
+  vectors (mm) of the tactile flow from that reference (weight 1; from the unloaded sensor,
+  negated as above), the centre of pressure from that reference (weight 1), and, when they
+  moved more than ``min_displacement_mm``, the dynamic flow (weight 1/2) and — in a record
+  that begins in contact — the static flow from its first settled frame (weight 1/2: the
+  motion seen during the record). A source that moved more counts more: a light contact's
+  pattern barely shifts from its onset while its flow travels along the slip. The agreement
+  |Σ w v| / Σ w |v| (0..1; 1: every source points the same way) is reported;
+- ``slip_displacement_mm``: the larger of the centre of pressure's displacement from the
+  reference and the net distance the dynamic flow travelled over the segment: a firm contact
+  pulled along shifts its pattern by the skin's stretch; a light one slips almost at once,
+  its pattern barely shifted, and the stick-slip of the sliding (a slow stretch, a fast
+  release the flow under-reads) leaves a net flow along the motion. (The flow's magnitude
+  from an empty frame is not a distance: 0.2–0.9 of the centre of pressure's, with the
+  pattern's width.)
+- ``slip_class``: ``translation`` if the displacement ≥ ``min_displacement_mm``; else
+  ``rotation`` if |rotation| ≥ ``min_rotation_deg``; else ``none`` (only touched). A
+  translation turns the pattern's flow a little too (up to ~2° in the simulated grid), so the
+  displacement decides first;
+- ``confidence`` (0..1): translation min(1, d / 2d_min) × the direction's agreement; rotation
+  min(1, |rot| / 2θ_min) × (1 − d / d_min); none 1 − max(d / d_min, |rot| / θ_min).
 """
 
 from __future__ import annotations
@@ -159,18 +165,19 @@ def estimate(cf, activation, start: int, stop: int, model, cfg) -> dict | None:
         parts.append((WEIGHTS["dynamic"], dyn))
     if not true_onset and flow_o is not None and np.hypot(*flow_o[:2]) >= cfg.min_displacement_mm:
         parts.append((WEIGHTS["change"], flow_o))
-    units, weights = [], []
+    vectors, weights = [], []
     for w, v in parts:
         if v is None or not np.all(np.isfinite(v[:2])) or not np.any(v[:2]):
             continue
-        units.append(np.asarray(v[:2]) / np.hypot(*v[:2]))
+        vectors.append(np.asarray(v[:2], float))
         weights.append(w)
     direction = agreement = None
-    if units:
-        total = np.sum([w * u for w, u in zip(weights, units)], axis=0)
-        agreement = float(np.hypot(*total) / sum(weights))
+    if vectors:
+        total = np.sum([w * v for w, v in zip(weights, vectors)], axis=0)
+        agreement = float(np.hypot(*total) / sum(w * np.hypot(*v) for w, v in zip(weights, vectors)))
         direction = float(np.degrees(np.arctan2(total[1], total[0]))) if np.any(total) else None
-    displacement = float(np.hypot(*cop_vec[:2])) if np.all(np.isfinite(cop_vec[:2])) else None
+    travelled = [np.hypot(*v[:2]) for v in (cop_vec, dyn) if v is not None and np.all(np.isfinite(v[:2]))]
+    displacement = float(max(travelled)) if travelled else None
     rotation = rot_o
     slip_class, confidence = classify(displacement, rotation, agreement, cfg)
     return {"slip_direction_sensor_deg": direction, "slip_displacement_mm": displacement, "rotation_deg": rotation,
@@ -183,10 +190,11 @@ def classify(displacement, rotation, agreement, cfg) -> tuple[str | None, float 
     agreement (module doc); ``(None, None)`` without a displacement."""
     if displacement is None or not math.isfinite(displacement):
         return None, None
-    d_thr, r_thr = max(cfg.min_displacement_mm, 1e-9), max(cfg.min_rotation_deg, 1e-9)
+    d = displacement / max(cfg.min_displacement_mm, 1e-9)
     rot = abs(rotation) if rotation is not None and math.isfinite(rotation) else 0.0
-    if rot >= r_thr:
-        return "rotation", float(min(1.0, rot / (2 * r_thr)))
-    if displacement >= d_thr:
-        return "translation", float(min(1.0, displacement / (2 * d_thr)) * (agreement or 0.0))
-    return "none", float(max(0.0, 1.0 - max(displacement / d_thr, rot / r_thr)))
+    r = rot / max(cfg.min_rotation_deg, 1e-9)
+    if d >= 1.0:
+        return "translation", float(min(1.0, d / 2.0) * (agreement or 0.0))
+    if r >= 1.0:
+        return "rotation", float(min(1.0, r / 2.0) * (1.0 - d))
+    return "none", float(max(0.0, 1.0 - max(d, r)))

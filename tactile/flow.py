@@ -139,6 +139,23 @@ def contact_reference(total_activation, threshold: float, settle: int = 10) -> i
                      f"samples; no contact to take as the static-flow reference")
 
 
+def loaded_reference(load, start: int, fraction: float = 0.8) -> int:
+    """First index ≥ ``start`` at which ``load`` (T,) reaches ``fraction`` of its median over
+    [start, T): the frame where a contact, once settled, has also finished loading. A
+    static flow from an earlier frame would mostly see the pattern grow as the finger
+    presses in, not where it moves.
+
+    >>> loaded_reference(np.r_[0, 1, 2, 4, 8, 9, 10, 10, 10, 10], start=1)
+    4
+    """
+    x = np.asarray(load, dtype=np.float64)
+    if not 0 <= start < len(x):
+        raise ValueError(f"start: expected an index in [0, {len(x)}), got {start}")
+    level = fraction * float(np.median(x[start:]))
+    hits = np.flatnonzero(x[start:] >= level)
+    return start + int(hits[0]) if hits.size else start
+
+
 def to_mm_per_s(flow_px, mm_per_px: float, rate_hz: float) -> np.ndarray:
     """Dynamic flow px/frame → mm/s on the view plane."""
     return np.asarray(flow_px) * np.float32(mm_per_px * rate_hz)
