@@ -13,7 +13,6 @@ option, the ``[view]`` extra not installed), 1 anything else. Errors are one lin
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import os
 import sys
 import time
@@ -41,7 +40,9 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if importlib.util.find_spec("rerun") is None:
+    try:
+        import rerun  # noqa: F401 - the optional [view] extra
+    except ImportError:
         print(f"tactile-view: the viewer needs rerun-sdk, not installed: {INSTALL_HINT}", file=sys.stderr)
         return BAD_INPUT
     from .scene import SceneError
@@ -57,8 +58,10 @@ def main(argv=None) -> int:
 
 
 def check(args) -> None:
-    """Options that are wrong whatever the run: :class:`viewer.scene.SceneError` naming the option."""
-    from .scene import SceneError
+    """The run directory, then options that are wrong whatever the run: :class:`viewer.scene.SceneError`
+    naming what is wrong."""
+    from .scene import SceneError, find_store
+    find_store(args.run_dir)
     if args.save is not None and Path(args.save).suffix != ".rrd":
         raise SceneError(f"--save {args.save}: expected a file name ending in .rrd")
     if args.save is not None and not Path(args.save).resolve().parent.is_dir():

@@ -26,13 +26,8 @@ import numpy as np
 import rerun as rr
 
 from . import TIMELINE, draw
+from .live import send_events, send_live
 from .scene import ARROW_SPACING, Scene, TactileTrack, tactile_tracks
-
-STEP_KINDS = {"step_start", "step_end"}
-LEVELS = {"interlock": "ERROR", "fault": "ERROR", "error": "ERROR", "abort": "ERROR", "protective_stop": "ERROR",
-          "gap": "WARN", "invalid": "WARN", "slip": "WARN", "reaction": "WARN", "timeout": "WARN",
-          "step_start": "DEBUG", "step_end": "DEBUG"}
-
 
 def times(seconds) -> list:
     """The timeline column for ``seconds`` since run start."""
@@ -40,18 +35,29 @@ def times(seconds) -> list:
 
 
 def record_scene(rec: rr.RecordingStream, scene: Scene, arrow_gain: float | None = None) -> float:
-    """Send the whole scene to ``rec``: the time series first (cheap), then the tactile frames and
-    flow of the fingers that touched something (their flow sets the arrow gain unless
-    ``arrow_gain`` is given), then the other fingers'. Returns the arrow gain (px drawn per
-    px/frame)."""
+    """Send the whole scene to ``rec``: the time series first (cheap: a viewer shows the run at
+    once), then the tactile frames and flow (:func:`send_tactile`). Returns the arrow gain."""
+    send_series(rec, scene)
+    return send_tactile(rec, scene, arrow_gain)
+
+
+def send_series(rec, scene: Scene) -> None:
+    """Everything but the tactile frames: signals, pose, states, events, pour, live verdicts,
+    and the fingertips' colours."""
     send_signals(rec, scene)
     send_pose(rec, scene)
     send_states(rec, scene)
     if scene.pour is not None:
         send_pour(rec, scene.pour)
     if scene.live is not None:
-        send_live(rec, scene.live, scene.noise)
+        send_live(rec, scene.live, scene.live["live_finger"], scene.live["view"], scene.noise)
     send_fingertips(rec, scene)
+
+
+def send_tactile(rec, scene: Scene, arrow_gain: float | None = None) -> float:
+    """The tactile frames and flow: first of the fingers that touched something (their flow sets
+    the arrow gain unless ``arrow_gain`` is given), then of the others; then the ``run``
+    document, which names the gain. Returns the gain (px drawn per px/frame)."""
     active = scene.active_fingers()
     gain = arrow_gain
     for group in (active, [f for f in scene.run.fingers if f not in active]):
@@ -113,18 +119,10 @@ def send_pose(rec, scene: Scene) -> None:
 
 
 def send_states(rec, scene: Scene) -> None:
-    """Protocol steps and analysis segments as state lanes, and every event as a log line."""
+    """Every event as a log line, the protocol's steps and the analysis' segments as state lanes."""
     ev = scene.run.events
-    for t, kind, name, detail in zip(ev.time, ev.kind, ev.name, ev.detail):
-        rec.set_time(TIMELINE, duration=float(t))
-        if kind == "step_start":
-            rec.log("protocol/step", rr.StateChange(state=name))
-        elif kind == "step_end":
-            rec.log("protocol/step", rr.StateChange.cleared())
     if len(ev.time):
-        text = [f"{k} {n}" + (f" {json.dumps(d)}" if d else "") for k, n, d in zip(ev.kind, ev.name, ev.detail)]
-        rec.send_columns("events", times(ev.time),
-                         rr.TextLog.columns(text=text, level=[LEVELS.get(k, "INFO") for k in ev.kind]))
+        send_events(rec, list(zip(ev.time, ev.kind, ev.name, ev.detail)))
     from analysis.figures import COLOURS
     for f in scene.run.fingers:
         segs = sorted((s for s in scene.segments if s.get("finger") == f), key=lambda s: s["start_s"])
@@ -150,32 +148,6 @@ def send_pour(rec, pour: dict) -> None:
         if name in pour and len(pour.get(tkey, ())):
             rec.log(f"pour/{name}", rr.SeriesLines(names=f"{name} ({unit})"), static=True)
             rec.send_columns(f"pour/{name}", times(pour[tkey]), rr.Scalars.columns(scalars=pour[name]))
-
-
-def send_live(rec, live: dict, noise: float) -> None:
-    """The live monitor's rows (``live`` group): its flow per finger and view, the filtered total
-    activation, which cause fired, and the latched slip verdict as a state lane."""
-    t = live["time_live"].astype(float)
-    col = times(t)
-    for k, f in enumerate(live["live_finger"]):
-        for v, view in enumerate(live["view"]):
-            mag = live["magnitude"][:, k, v].astype(float)
-            rec.send_columns(f"live/{f}/{view}/magnitude", col, rr.Scalars.columns(scalars=mag))
-            rec.send_columns(f"live/{f}/{view}/direction", col, rr.Scalars.columns(
-                scalars=draw.direction_deg(live["direction"][:, k, v], mag, noise)))
-        rec.send_columns(f"live/{f}/activation_total", col,
-                         rr.Scalars.columns(scalars=live["activation_total"][:, k].astype(float)))
-        rec.send_columns(f"live/{f}/slip_cause", col, rr.Scalars.columns(scalars=live["slip_cause"][:, k].astype(float)))
-    send_slip_lane(rec, t, live["slip_detected"].astype(bool))
-
-
-def send_slip_lane(rec, t, detected) -> None:
-    """``live/slip``: "watching" from the first row, "slip" from each row the latch turns on."""
-    change = np.flatnonzero(np.r_[True, detected[1:] != detected[:-1]])
-    rec.log("live/slip", rr.StateConfiguration(values=["watching", "slip"], colors=[0x55A868FF, 0xC44E52FF]),
-            static=True)
-    rec.send_columns("live/slip", times(t[change]),
-                     rr.StateChange.columns(state=["slip" if detected[i] else "watching" for i in change]))
 
 
 def send_track(rec, track: TactileTrack, scene: Scene, gain: float) -> None:
