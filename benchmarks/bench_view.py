@@ -1,6 +1,6 @@
 """The viewer's cost: opening a 60 s five-finger run, and the live viewer's load on the live monitor (JSON lines).
 
-    python benchmarks/bench_view.py [--keep DIR] [--seconds 20]
+    python benchmarks/bench_view.py [--keep DIR] [--seconds 20] [--only view|live]
 
 The run: benchmarks/bench_analysis.py's 60 s store (a simulated straws sweep tiled to 60 s,
 every finger carrying the sweeping finger's data: five fingers in contact, the worst case for
@@ -15,7 +15,8 @@ frames and flow).
   (writing ``live.rrd``, no window): ``flat_out`` pushes ``--seconds`` of frames as fast as the
   monitor takes them (``realtime_margin`` = data seconds / wall seconds, the engine's headroom);
   ``paced`` delivers them at 100 Hz on the wall clock, as a run does, and reports the monitor's
-  time per engine period (median, p99, max) and the rows the viewer dropped.
+  time per engine period (median, p99, max) and the rows the viewer dropped. Each case runs
+  ``--repeats`` times, with and without the viewer alternately; the line gives the medians.
 """
 
 from __future__ import annotations
@@ -179,13 +180,26 @@ def run_monitor(frames, fingers, views, with_viewer: bool, paced: bool, work: Pa
     return out
 
 
-def bench_live(store: Path, work: Path, seconds: float) -> None:
+def bench_live(store: Path, work: Path, seconds: float, repeats: int) -> None:
+    """Without and with the viewer, alternately, ``repeats`` times each (the machine is shared:
+    alternating spreads its load over both); one line per case with the medians."""
     frames, fingers = load_frames(store, seconds)
     for views in (("bottom",), ("bottom", "left", "right")):
         for paced in (False, True):
-            for with_viewer in (False, True):
-                row = run_monitor(frames, fingers, views, with_viewer, paced, work)
-                emit(bench="live", mode="paced" if paced else "flat_out", **row)
+            runs = {False: [], True: []}
+            for _ in range(repeats):
+                for with_viewer in (False, True):
+                    runs[with_viewer].append(run_monitor(frames, fingers, views, with_viewer, paced, work))
+            for with_viewer, rows in runs.items():
+                med = {k: round(float(np.median([r[k] for r in rows])), 3) for k, v in rows[0].items()
+                       if isinstance(v, (int, float)) and not isinstance(v, bool)}
+                extra = {}
+                if "realtime_margin" in med:
+                    extra["realtime_margin_each"] = [r["realtime_margin"] for r in rows]
+                if with_viewer:
+                    extra["rows_dropped_each"] = [r["rows_dropped"] for r in rows]
+                emit(bench="live", mode="paced" if paced else "flat_out", views=list(views), viewer=with_viewer,
+                     repeats=repeats, **med, **extra)
 
 
 def main() -> None:
@@ -195,6 +209,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--keep", help="work directory (kept); default: a temporary one")
     ap.add_argument("--seconds", type=float, default=20.0, help="live: seconds of frames per measurement")
+    ap.add_argument("--only", choices=["view", "live"], help="run one part only")
+    ap.add_argument("--repeats", type=int, default=3, help="live: runs of each case, with and without alternating")
     args = ap.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     from bench_analysis import make_store
@@ -203,8 +219,10 @@ def main() -> None:
     store = work / "bench" / "run.zarr"
     if not store.exists():
         store = make_store(work)
-    bench_view(store, work)
-    bench_live(store, work, args.seconds)
+    if args.only != "live":
+        bench_view(store, work)
+    if args.only != "view":
+        bench_live(store, work, args.seconds, args.repeats)
 
 
 if __name__ == "__main__":

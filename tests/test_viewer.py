@@ -169,10 +169,12 @@ def test_a_straws_sweep_replays_every_stream_on_the_run_timeline(straws):
 def test_a_reactive_pour_replays_every_stream_and_the_live_verdicts(pour):
     _check_replay(pour)
     rec, live = pour["rrd"], pour["tree"]["live"].to_dataset()
-    for f in [str(f) for f in live.live_finger.values]:
-        for entity in (f"/live/{f}/bottom/magnitude", f"/live/{f}/bottom/direction", f"/live/{f}/activation_total",
-                       f"/live/{f}/slip_cause"):
-            assert_on_timeline(rec, entity, live.time_live.values)
+    for entity, series in (("/live/magnitude", 3), ("/live/direction", 3), ("/live/activation_total", 3),
+                           ("/live/slip_cause", 3)):                      # ff, mf, th × bottom
+        assert_on_timeline(rec, entity, live.time_live.values)
+        assert len(rec.values(entity, "Scalars:scalars")[0]) == series
+    magnitude = np.array(rec.values("/live/magnitude", "Scalars:scalars"))
+    assert np.allclose(magnitude, live.magnitude.values.reshape(len(magnitude), -1), equal_nan=True)
     assert [s for (s,) in rec.values("/live/slip", "StateChange:state")] == ["watching", "slip"]
     _, first, _ = rec.rows("/live/slip")
     assert first == pytest.approx(float(live.time_live[0]), abs=2e-9)
@@ -197,8 +199,8 @@ def test_the_live_viewer_shows_every_frame_the_monitor_processed(pour):
     assert viewer["rows_offered"] == viewer["rows_shown"] == live.sizes["time_live"] and viewer["rows_dropped"] == 0
     assert any("no display" in line for line in pour["console"]) or viewer["display"]
     rec = Recording(run_dir / "live.rrd")
+    assert_on_timeline(rec, "/live/magnitude", live.time_live.values)
     for f in [str(f) for f in live.live_finger.values]:
-        assert_on_timeline(rec, f"/live/{f}/bottom/magnitude", live.time_live.values)
         n, first, last = rec.rows(f"/tactile/{f}/bottom/frame")
         assert 0.8 * 25 * (last - first) <= n <= 25 * (last - first) + 2     # live frames at ≈ 25 per second
     assert rec.chunk_rows("/events") == tree["events"].sizes["event"]           # the engine's events, as they came
@@ -228,7 +230,7 @@ def test_the_live_viewer_drops_and_counts_when_it_cannot_keep_up_and_never_block
     assert counts["rows_shown"] + counts["rows_dropped"] == n and counts["error"] is None
     assert worst < 0.05                                                        # never waits for the viewer
     rec = Recording(tmp_path / "live.rrd")
-    assert rec.chunk_rows("/live/ff/bottom/magnitude") == counts["rows_shown"]
+    assert rec.chunk_rows("/live/magnitude") == counts["rows_shown"]
 
 
 def _rows(i, fingers):

@@ -84,8 +84,7 @@ def show(args) -> int:
     rec = rr.RecordingStream("tactile-flow", recording_id=uuid.uuid4())
     rec.send_recording_name(f"{scene.run.protocol or 'run'} {scene.run_dir.name}")
     blueprint = layout.replay(scene.active_fingers(), list(scene.model.plans), has_pour=pumped(scene),
-                              has_live=scene.live is not None, live_fingers=(scene.live or {}).get("live_finger", ()),
-                              live_views=(scene.live or {}).get("view", ()))
+                              has_live=scene.live is not None)
     partial = None
     if args.save:
         partial = Path(args.save).with_suffix(".rrd.partial")

@@ -18,7 +18,7 @@ def frame_grid(fingers, views) -> rrb.Grid:
                     grid_columns=len(views), name="tactile frames and flow")
 
 
-def replay(fingers, views, has_pour: bool, has_live: bool, live_fingers=(), live_views=()) -> rrb.Blueprint:
+def replay(fingers, views, has_pour: bool, has_live: bool) -> rrb.Blueprint:
     """The layout of ``tactile-view``: the frames of the active ``fingers`` (a row each, a column
     per view) beside the arm and the fingertips in 3D; the time series below them; the steps,
     segments and slip state as lanes at the bottom."""
@@ -30,8 +30,7 @@ def replay(fingers, views, has_pour: bool, has_live: bool, live_fingers=(), live
     if has_pour:
         series.append(rrb.TimeSeriesView(origin="pour", name="pump and scale"))
     if has_live:
-        series.append(rrb.TimeSeriesView(origin="live", contents=live_series(live_fingers, live_views),
-                                         name="live flow (px/frame)"))
+        series.append(rrb.TimeSeriesView(origin="live/magnitude", name="live flow (px/frame)"))
     return rrb.Blueprint(
         rrb.Vertical(
             rrb.Horizontal(frame_grid(fingers, views),
@@ -47,10 +46,6 @@ def replay(fingers, views, has_pour: bool, has_live: bool, live_fingers=(), live
         collapse_panels=True)
 
 
-def live_series(fingers, views) -> list[str]:
-    return [f"live/{f}/{v}/magnitude" for f in fingers for v in views]
-
-
 def lanes() -> rrb.StateTimelineView:
     return rrb.StateTimelineView(origin="/", contents=["protocol/**", "segments/**", "live/slip"],
                                  name="steps, segments, slip")
@@ -61,10 +56,8 @@ def live(fingers, views) -> rrb.Blueprint:
     return rrb.Blueprint(
         rrb.Horizontal(
             frame_grid(fingers, views),
-            rrb.Vertical(rrb.TimeSeriesView(origin="live", contents=live_series(fingers, views),
-                                            name="live flow (px/frame)"),
-                         rrb.TimeSeriesView(origin="live", contents=[f"live/{f}/activation_total" for f in fingers],
-                                            name="Σ activation (kΩ)"),
+            rrb.Vertical(rrb.TimeSeriesView(origin="live/magnitude", name="live flow (px/frame)"),
+                         rrb.TimeSeriesView(origin="live/activation_total", name="Σ activation (kΩ)"),
                          lanes(),
                          rrb.TextLogView(origin="events", name="events"))),
         rrb.TimePanel(timeline=TIMELINE, expanded=True),

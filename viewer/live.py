@@ -3,7 +3,8 @@
 :class:`LiveViewer` is fed by :class:`protocols.live.LiveMonitor` — the rows it has just
 recorded (the ``live`` group's columns) and, a few times a second, copies of the latest tactile
 frames and flow fields — plus the engine's events, through a bounded queue. Its own thread
-drains the queue every ``1 / fps`` s and sends what it found to Rerun in columns. The engine
+drains the queue every :data:`DRAIN_S` and sends what it found to Rerun in columns (one call
+per entity and drain: the thread's cost is in the calls, not the rows). The engine
 never waits for it: :meth:`LiveViewer.offer` only copies a few small arrays and puts them on the
 queue, and when the queue is full (the viewer fell ``QUEUE_ITEMS`` engine periods behind) the
 rows are dropped and counted. :meth:`LiveViewer.close` returns the counts, which the run keeps
@@ -34,6 +35,7 @@ import numpy as np
 from . import INSTALL_HINT, TIMELINE, draw
 
 QUEUE_ITEMS = 256        # engine periods of backlog (2.56 s at 100 Hz) before rows are dropped
+DRAIN_S = 0.1            # the viewer's thread sends what is queued 10 times a second (its CPU: a few %)
 PORT = 9876              # the native viewer's gRPC port (Rerun's default)
 LIVE_ARROW_GAIN = 20.0   # px drawn per px/frame: a slip (≥ 0.1 px/frame) shows, sensor noise hardly
 LIVE_FILE = "live.rrd"
@@ -50,7 +52,7 @@ class LiveViewer:
         fingers, views: the monitor's fingers and views (the rows' F and V axes).
         model: the monitor's :class:`tactile.pipeline.TactileModel` (frame shapes, footprints).
         run_dir: where ``live.rrd`` is written.
-        fps: frames sent per second, and how often the queue is drained.
+        fps: tactile frames shown per second.
         spawn: start (or reuse) a native viewer when there is a display.
 
     Attributes:
@@ -146,7 +148,7 @@ class LiveViewer:
                     self.error = f"{type(exc).__name__}: {exc}"
             if stopping:
                 return
-            time.sleep(self.period)
+            time.sleep(DRAIN_S)
 
     def _send(self, items) -> None:
         rows = [it[1] for it in items if it[0] == "rows"]
@@ -154,10 +156,9 @@ class LiveViewer:
             batch = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
             self._slip = send_live(self.rec, batch, self.fingers, self.views, self.noise, self._slip)
             self.shown += len(batch["time_live"])
-        for _, _, images in (it for it in items if it[0] == "rows" and it[2] is not None):
-            t, per_view = images
-            for f, v, frame, vectors in per_view:
-                self._send_image(t, f, v, frame, vectors)
+        images = [it[2] for it in items if it[0] == "rows" and it[2] is not None]
+        if images:
+            self._send_images(images)
         events = [it[1:] for it in items if it[0] == "event"]
         if events:
             send_events(self.rec, events)
@@ -176,12 +177,18 @@ class LiveViewer:
         self.rec.log("run", rr.TextDocument(f"Live view: flow arrows ×{LIVE_ARROW_GAIN:g} (px drawn per px/frame); "
                                             f"frames at {1 / self.period:g} per second."), static=True)
 
-    def _send_image(self, t, finger, view, frame, vectors) -> None:
+    def _send_images(self, images) -> None:
+        """Frames and flow arrows of every finger × view, one call each for all the queued times."""
         rr = self.rr
-        base, col = f"tactile/{finger}/{view}", [rr.TimeColumn(TIMELINE, duration=[t])]
-        self.rec.send_columns(f"{base}/frame", col, rr.Image.columns(buffer=draw.colour_frames(frame).reshape(1, -1)))
-        self.rec.send_columns(f"{base}/flow", col, rr.Arrows2D.columns(vectors=vectors * LIVE_ARROW_GAIN)
-                              .partition([len(vectors)]))
+        col = [rr.TimeColumn(TIMELINE, duration=[t for t, _ in images])]
+        for k, (f, v, _, vectors) in enumerate(images[0][1]):
+            frames = np.stack([per_view[k][2] for _, per_view in images])
+            arrows = np.stack([per_view[k][3] for _, per_view in images]) * LIVE_ARROW_GAIN
+            base = f"tactile/{f}/{v}"
+            self.rec.send_columns(f"{base}/frame", col,
+                                  rr.Image.columns(buffer=draw.colour_frames(frames).reshape(len(images), -1)))
+            self.rec.send_columns(f"{base}/flow", col, rr.Arrows2D.columns(vectors=arrows.reshape(-1, 2))
+                                  .partition([len(vectors)] * len(images)))
 
 
 def compact(path: Path) -> None:
@@ -202,34 +209,36 @@ def compact(path: Path) -> None:
 
 
 def send_live(rec, rows: dict, fingers, views, noise: float, previous: bool | None = None) -> bool | None:
-    """The live monitor's rows — the ``live`` group's columns, (L, ...) — as ``live/<finger>/<view>/magnitude``
-    (px/frame) and ``.../direction`` (deg), ``live/<finger>/activation_total`` (kΩ) and
-    ``live/<finger>/slip_cause`` (0 none, 1 release, 2 creep, 3 rotation), and the latched
-    verdict as the state lane ``live/slip`` ("watching" / "slip", sent where it changes from
-    ``previous``). Returns the last verdict. Used live and to replay a recorded ``live`` group."""
+    """The live monitor's rows — the ``live`` group's columns, (L, ...) — as four multi-series
+    entities, one series per finger (× view): ``live/magnitude`` (px/frame), ``live/direction``
+    (deg), ``live/activation_total`` (kΩ), ``live/slip_cause`` (0 none, 1 release, 2 creep,
+    3 rotation); and the latched verdict as the state lane ``live/slip`` ("watching" / "slip",
+    sent where it changes from ``previous``; ``None``: the first call, which also names the
+    series). Returns the last verdict. Used live, and to replay a recorded ``live`` group."""
     import rerun as rr
     t = np.asarray(rows["time_live"], np.float64)
-    col = [rr.TimeColumn(TIMELINE, duration=t)]
-    for k, f in enumerate(fingers):
-        for v, view in enumerate(views):
-            mag = np.asarray(rows["magnitude"][:, k, v], np.float64)
-            rec.send_columns(f"live/{f}/{view}/magnitude", col, rr.Scalars.columns(scalars=mag))
-            rec.send_columns(f"live/{f}/{view}/direction", col,
-                             rr.Scalars.columns(scalars=draw.direction_deg(rows["direction"][:, k, v], mag, noise)))
-        rec.send_columns(f"live/{f}/activation_total", col,
-                         rr.Scalars.columns(scalars=np.asarray(rows["activation_total"][:, k], np.float64)))
-        rec.send_columns(f"live/{f}/slip_cause", col,
-                         rr.Scalars.columns(scalars=np.asarray(rows["slip_cause"][:, k], np.float64)))
+    n, col = len(t), [rr.TimeColumn(TIMELINE, duration=t)]
+    mag = np.asarray(rows["magnitude"], np.float64).reshape(n, -1)               # (L, F·V), finger-major
+    series = {"magnitude": mag,
+              "direction": draw.direction_deg(np.asarray(rows["direction"]).reshape(n, -1), mag, noise),
+              "activation_total": np.asarray(rows["activation_total"], np.float64),
+              "slip_cause": np.asarray(rows["slip_cause"], np.float64)}
+    if previous is None:
+        per_view = [f"{f} {v}" for f in fingers for v in views]
+        for name, names in (("magnitude", per_view), ("direction", per_view), ("activation_total", list(fingers)),
+                            ("slip_cause", list(fingers))):
+            rec.log(f"live/{name}", rr.SeriesLines(names=names), static=True)
+        rec.log("live/slip", rr.StateConfiguration(values=["watching", "slip"], colors=[0x55A868FF, 0xC44E52FF]),
+                static=True)
+    for name, values in series.items():
+        rec.send_columns(f"live/{name}", col, rr.Scalars.columns(scalars=values.ravel()).partition([values.shape[1]] * n))
     detected = np.asarray(rows["slip_detected"], bool)
     before = np.r_[not detected[0] if previous is None else previous, detected[:-1]]
     change = np.flatnonzero(detected != before)
-    if previous is None:
-        rec.log("live/slip", rr.StateConfiguration(values=["watching", "slip"], colors=[0x55A868FF, 0xC44E52FF]),
-                static=True)
     if change.size:
         rec.send_columns("live/slip", [rr.TimeColumn(TIMELINE, duration=t[change])],
                          rr.StateChange.columns(state=["slip" if detected[i] else "watching" for i in change]))
-    return bool(detected[-1]) if len(detected) else previous
+    return bool(detected[-1]) if n else previous
 
 
 LEVELS = {"interlock": "ERROR", "fault": "ERROR", "error": "ERROR", "abort": "ERROR", "protective_stop": "ERROR",

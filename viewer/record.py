@@ -11,7 +11,7 @@ time base, so every stream lines up as recorded. Entities (docs/viewer.md has th
   fingertip's half-ellipsoid coloured by activation, at the shown frames), ``arm/speed``;
 - ``pour/pump_rate``, ``pour/dispensed``, ``pour/mass``;
 - ``protocol/step`` and ``segments/<finger>`` (state lanes), ``events`` (text log);
-- ``live/...`` (the live monitor's verdicts, when the run recorded them);
+- ``live/...`` (the live monitor's rows, when the run recorded them: :func:`viewer.live.send_live`);
 - ``run`` (a text document: the run, its headline results, what was left out, the arrow scale).
 
 Everything temporal is sent in columns (``send_columns``), one call per entity, so a 60 s
@@ -28,6 +28,7 @@ import rerun as rr
 from . import TIMELINE, draw
 from .live import send_events, send_live
 from .scene import ARROW_SPACING, Scene, TactileTrack, tactile_tracks
+
 
 def times(seconds) -> list:
     """The timeline column for ``seconds`` since run start."""

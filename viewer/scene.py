@@ -83,7 +83,8 @@ class Scene:
         live: the ``live`` group as arrays (``time_live``, ``magnitude`` (L, F, V), ...) with
             ``live_finger`` and ``view`` names, or ``None`` (no live monitor in this run).
         fingertips: finger → (6,) sensor pose in the TCP frame [x, y, z m, rotvec rad], from the
-            run's config (``hardware.fingertips``); fingers without one are not placed in 3D.
+            run's config (``hardware.fingertips``); fingers without one (imported recordings)
+            are laid out 50 mm apart in the TCP frame.
         notes: what could not be shown and why (one sentence each).
     """
 
