@@ -159,6 +159,21 @@ def test_a_straws_sweep_replays_every_stream_on_the_run_timeline(straws):
     assert max(frames["/tactile/ff/bottom/frame:Image:buffer"][k].as_py()[0]) > 100
     arrows = np.array(rec.values("/tactile/ff/bottom/flow", "Arrows2D:vectors")[k])
     assert np.abs(arrows).max() > 0.5
+    # the frames and flow shown are the analysis' own, frame for frame
+    from analysis.config import load_config
+    from analysis.load import load_run
+    from analysis.pipeline import analyse
+    from viewer.scene import load_scene, tactile_tracks
+    scene = load_scene(straws["dir"])
+    cfg = load_config({**scene.run.config["analysis"], "save_fields": True, "progress": False})
+    (cf, *_) = [c for c in analyse(load_run(straws["dir"] / "run.zarr"), cfg).flows if c.finger == "ff"]
+    (w0, w1), (track,) = cf.window, tactile_tracks(scene, ["ff"])[:1]
+    inside = [(j, i - w0) for j, i in enumerate(scene.shown) if w0 < i < w1]
+    assert len(inside) > 10
+    result = cf.views["bottom"]
+    for j, i in inside:
+        assert np.array_equal(track.frames[j], result.frames[i])
+        assert np.array_equal(track.arrows[j], draw.sample_field(result.dynamic_field[i], track.grid))
     # the run document names what was shown and the arrow scale
     (doc,) = RrdReader(str(straws["dir"] / "view.rrd")).stream().collect().reader(
         index=None, contents="/run").to_arrow_table()["/run:TextDocument:text"].to_pylist()
@@ -332,12 +347,13 @@ def test_a_still_pattern_has_no_direction_and_a_sweep_along_the_finger_does_not_
 
 
 def test_mesh_and_frame_colours_share_one_scale(model):
-    lo, hi = model.config.intensity_range
-    values = np.array([lo, (lo + hi) / 2, hi, hi * 2])
-    rgba = draw.activation_colours(values, (lo, hi))
     from tactile.frames import to_uint8
-    assert np.array_equal(rgba[:, :3], draw.colour_frames(to_uint8(values, lo, hi)))
-    assert np.array_equal(rgba[2], rgba[3]) and (rgba[:, 3] == 255).all()
+    lo, hi = model.config.intensity_range
+    values = np.array([[lo, (lo + hi) / 2, hi, hi * 2], [0.0, 0.5, 1.0, 2.0]])
+    rgba = draw.activation_colours(values, [(lo, hi), (0.0, 1.0)])          # a row per frame, each its own range
+    assert np.array_equal(rgba[0, :, :3], draw.colour_frames(to_uint8(values[0], lo, hi)))
+    assert np.array_equal(rgba[1, :, :3], draw.colour_frames(to_uint8(values[1], 0.0, 1.0)))
+    assert np.array_equal(rgba[0, 2], rgba[0, 3]) and np.array_equal(rgba[1, 2], rgba[0, 2]) and (rgba[..., 3] == 255).all()
 
 
 def test_rotation_vectors_become_rerun_quaternions():

@@ -32,10 +32,16 @@ def colour_frames(frames_u8) -> np.ndarray:
     return colour_map()[np.asarray(frames_u8, np.uint8)]
 
 
-def activation_colours(values, intensity_range: tuple[float, float]) -> np.ndarray:
-    """(..., M) activation (kΩ) at mesh vertices → (..., M, 4) RGBA uint8 on the frames' fixed scale
-    (:func:`tactile.frames.to_uint8`), so a vertex and a pixel of equal activation look the same."""
-    rgb = colour_map()[to_uint8(values, *intensity_range)]
+def activation_colours(values, ranges) -> np.ndarray:
+    """(N, M) activation (kΩ) at mesh vertices → (N, M, 4) RGBA uint8, row n on the intensity
+    range ``ranges[n]`` = (low, high) kΩ (:func:`tactile.frames.to_uint8`, as the frames are
+    drawn), so a vertex and a pixel of equal activation look the same."""
+    values, ranges = np.asarray(values), np.broadcast_to(np.asarray(ranges, float), (len(values), 2))
+    u8 = np.empty(values.shape, np.uint8)
+    for rng in np.unique(ranges, axis=0):
+        sel = np.all(ranges == rng, axis=1)
+        u8[sel] = to_uint8(values[sel], *rng)
+    rgb = colour_map()[u8]
     return np.concatenate([rgb, np.full(rgb.shape[:-1] + (1,), 255, np.uint8)], axis=-1)
 
 

@@ -81,6 +81,7 @@ def describe(scene: Scene, gain: float) -> str:
              f"({scene.fps:g} per second); time series at their recorded rates.",
              f"Flow arrows ×{gain:g} (px drawn per px/frame); the green arrow is the aggregated "
              f"direction (shown when the mean flow exceeds {scene.noise / 2:g} px/frame).",
+             f"Intensity: {intensity(scene)}.",
              f"Pressure: {scene.prepared.pressure_name} above rest ({scene.prepared.pressure_units}); "
              f"baseline: {scene.prepared.baseline_source}."]
     if scene.summary:
@@ -89,6 +90,16 @@ def describe(scene: Scene, gain: float) -> str:
     if scene.notes:
         lines += ["", "## Not shown", ""] + [f"- {n}" for n in scene.notes]
     return "\n".join(lines)
+
+
+def intensity(scene: Scene) -> str:
+    """How the frames' grey levels map to activation, in words."""
+    fixed = np.asarray(scene.model.config.intensity_range, float)
+    windows = scene.ranges[..., 1][np.any(scene.ranges != fixed, axis=-1)]
+    if windows.size == 0:
+        return f"{fixed[0]:g}–{fixed[1]:g} kΩ → 0–255 throughout"
+    return (f"each contact window from 0 kΩ to its peak activation ({windows.min():.2f}–{windows.max():.2f} kΩ) "
+            f"→ 0–255, as the analysis renders it; outside the windows {fixed[0]:g}–{fixed[1]:g} kΩ")
 
 
 def send_signals(rec, scene: Scene) -> None:
@@ -189,6 +200,6 @@ def send_fingertips(rec, scene: Scene) -> None:
                                                  scale=1e-3), static=True)
         rec.log(f"world/tcp/{f}/mesh", rr.Mesh3D(vertex_positions=mesh.points, triangle_indices=mesh.triangles,
                                                  vertex_normals=mesh.normals), static=True)
-        colours = draw.activation_colours(act[:, k] @ model.weights.T, model.config.intensity_range)
+        colours = draw.activation_colours(act[:, k] @ model.weights.T, scene.ranges[:, k])
         rec.send_columns(f"world/tcp/{f}/mesh", times(scene.times),
                          rr.Mesh3D.columns(vertex_colors=colours.reshape(-1, 4)).partition([m] * len(scene.shown)))

@@ -7,6 +7,13 @@ baseline, the Kalman + RTS smoothed activation, the pressure above rest). :func:
 then renders the tactile frames and their dynamic flow, per finger and view, at the shown
 frames only.
 
+Intensity: the frames are the analysis' 8-bit frames. With ``analysis.tactile.intensity_range:
+contact`` (the default) the analysis scales each contact window (the contact ± the
+segmentation margin) from 0 kΩ to the window's peak activation: the viewer takes the windows
+from ``summary.json`` and does the same, and shows frames outside every window on the fixed
+scale of ``tactile.pipeline.TactileConfig`` (a run not analysed yet: the fixed scale
+throughout). With a fixed ``[low, high]``, that scale throughout.
+
 Decimation: images, flow and the fingertip's colours are shown at ``fps`` frames per second
 (every ``round(rate / fps)``-th BioTac frame); each shown frame's flow is the method's dynamic
 flow from the frame before it (10 ms at 100 Hz), exactly what the analysis computes for that
@@ -24,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.config import AnalysisConfigError, load_config
+from analysis.flows import MIN_PEAK_KOHM
 from analysis.load import AnalysisInputError, RunData, load_run
 from analysis.pipeline import get_model
 from analysis.preprocess import Prepared, prepare
@@ -76,6 +84,8 @@ class Scene:
         model: the :class:`tactile.pipeline.TactileModel` of the run's analysis config.
         noise: the flow's still level, px/frame.
         shown: (N,) indices into ``run.time`` of the frames shown (images, flow, fingertip colours).
+        ranges: (N, F, 2) the intensity range (low, high) kΩ mapped to 0..255 for each shown frame
+            and finger (see the module docstring).
         fps: the shown frame rate asked for.
         summary: ``summary.json`` of the analysis, or ``None`` (not analysed).
         segments: the analysis' segments (``summary.json``), possibly empty.
@@ -94,6 +104,7 @@ class Scene:
     model: object
     noise: float
     shown: np.ndarray
+    ranges: np.ndarray
     fps: float
     summary: dict | None
     segments: list
@@ -150,12 +161,42 @@ def load_scene(run_dir, fps: float = DEFAULT_FPS) -> Scene:
     step = max(1, int(round(run.rate_hz / fps)))
     shown = np.arange(min(1, len(run.time) - 1), len(run.time), step)
     summary = _summary(store.parent, notes)
+    ranges = intensity_ranges(run, prepared, cfg, (summary or {}).get("contacts"), notes)[shown]
+    for f, why in getattr(prepared, "unusable", {}).items():
+        notes.append(f"{f}: not analysed ({why})")
     groups = _groups(store)
     tips = ((run.config.get("hardware") or {}).get("fingertips") or {})
     fingertips = {f: np.asarray(tips[f], float) for f in run.fingers if f in tips and len(tips[f]) == 6}
     return Scene(run_dir=store.parent, run=run, prepared=prepared, model=model, noise=cfg.tactile.noise,
-                 shown=shown, fps=float(fps), summary=summary, segments=(summary or {}).get("segments") or [],
+                 shown=shown, ranges=ranges, fps=float(fps), summary=summary, segments=(summary or {}).get("segments") or [],
                  pour=groups.get("pour"), live=groups.get("live"), fingertips=fingertips, notes=notes)
+
+
+def intensity_ranges(run: RunData, prepared: Prepared, cfg, contacts: dict | None, notes: list) -> np.ndarray:
+    """(T, F, 2) the intensity range of every frame and finger, as the analysis renders it: the
+    fixed ``cfg.tactile.intensity_range``, or with ``cfg.intensity == "contact"`` (0, the
+    window's peak activation, at least :data:`analysis.flows.MIN_PEAK_KOHM`) over each contact
+    window of ``contacts`` (``summary.json``: finger → [[start, end] s]) ± the segmentation margin."""
+    T, F = len(run.time), len(run.fingers)
+    out = np.empty((T, F, 2))
+    out[:] = cfg.tactile.intensity_range
+    if cfg.intensity != "contact":
+        return out
+    if contacts is None:
+        notes.append("frames on the fixed intensity scale (the analysis scales each contact window to its peak: "
+                     "analyse the run to see its frames)")
+        return out
+    margin = int(round(cfg.segmentation.margin_s * run.rate_hz))
+    for f, intervals in contacts.items():
+        if f not in run.fingers:
+            continue
+        k = run.fingers.index(f)
+        for start, end in intervals:
+            a, b = np.searchsorted(run.time, [start, end])
+            b = T if b >= T - 1 else b
+            w0, w1 = max(0, a - margin), min(T, b + margin)
+            out[w0:w1, k] = (0.0, max(float(prepared.activation[w0:w1, k].max()), MIN_PEAK_KOHM))
+    return out
 
 
 def _summary(run_dir: Path, notes: list) -> dict | None:
@@ -192,18 +233,24 @@ def _groups(store: Path) -> dict:
 def tactile_tracks(scene: Scene, fingers=None) -> list[TactileTrack]:
     """Frames and dynamic flow of the shown frames, for every finger (or ``fingers``) and view.
 
-    Each shown frame i is rendered with frame i − 1 (:meth:`TactileModel.render_uint8`, the
-    analysis' renderer) and the flow between the two is the configured method's
+    Each shown frame i is rendered with frame i − 1 on frame i's intensity range (``scene.ranges``;
+    :meth:`TactileModel.render_uint8`, the analysis' renderer) and the flow between the two is the
+    configured method's
     (:class:`tactile.flow.FlowEstimator`); two identical frames (a finger out of contact) have
     zero flow without computing it. Aggregates: :func:`tactile.aggregate.aggregate_flow`.
     """
     model, act = scene.model, scene.prepared.activation
-    pairs = np.stack([scene.shown - 1, scene.shown], axis=1).clip(0).ravel()
+    pairs = np.stack([scene.shown - 1, scene.shown], axis=1).clip(0)
     out = []
     for finger in fingers or scene.run.fingers:
         k = scene.run.fingers.index(finger)
+        ranges = scene.ranges[:, k]
         for view, plan in model.plans.items():
-            both = model.render_uint8(act[pairs, k], view).reshape((len(scene.shown), 2) + plan.shape)
+            both = np.empty((len(pairs), 2) + plan.shape, np.uint8)
+            for rng in np.unique(ranges, axis=0):               # one render per intensity range
+                sel = np.all(ranges == rng, axis=1)
+                both[sel] = model.render_uint8(act[pairs[sel].ravel(), k], view, tuple(rng)).reshape(
+                    (int(sel.sum()), 2) + plan.shape)
             estimate = FlowEstimator(model.config.flow)
             field = np.zeros(both.shape[:1] + plan.shape + (2,), np.float32)
             for j, (prev, cur) in enumerate(both):
