@@ -37,7 +37,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
 def emit(**row):
-    print(json.dumps(row), flush=True)
+    """One JSON line, with the machine's load average (1 min) at the time: the machine is shared."""
+    print(json.dumps({**row, "load_avg_1min": round(os.getloadavg()[0], 2)}), flush=True)
 
 
 # ----------------------------------------------------------------------------- opening a run

@@ -342,6 +342,8 @@ def test_arrows_sit_on_the_footprint_and_the_gain_reads_simply(model):
 def test_a_still_pattern_has_no_direction_and_a_sweep_along_the_finger_does_not_wrap():
     d = draw.direction_deg([np.pi, -np.pi + 1e-3, 0.3], [0.2, 0.2, 0.001], noise=0.05)
     assert d[0] == pytest.approx(180) and d[1] == pytest.approx(180.06, abs=0.01) and np.isnan(d[2])
+    wobble = draw.unwrap_stretches([359.0, 1.0, 358.0, np.nan, 2.0, 359.0])  # about 0°: no 360° jumps
+    assert np.allclose(wobble[:3], [359, 361, 358]) and np.isnan(wobble[3]) and np.allclose(wobble[4:], [2, -1])
     arrows = draw.direction_arrows(np.array([[0.1, 0.0], [0.0, 0.001], [np.nan, np.nan]]), 0.05, 10)
     assert arrows[0] == pytest.approx([10, 0]) and not arrows[1:].any()
 

@@ -103,6 +103,19 @@ def direction_deg(direction_rad, magnitude, noise: float) -> np.ndarray:
     return np.where(np.asarray(magnitude, np.float64) >= noise / 2, d, np.nan)
 
 
+def unwrap_stretches(deg) -> np.ndarray:
+    """(T,) directions in degrees with NaN gaps → each stretch between gaps unwrapped (no jump of
+    360 between neighbours) and shifted by a multiple of 360 so that its median lies in
+    [0, 360): a direction that hovers about 0° plots as one line instead of jumping to 360."""
+    deg = np.array(deg, np.float64)
+    ok = np.isfinite(deg)
+    edges = np.flatnonzero(np.diff(np.r_[False, ok, False].astype(np.int8)))
+    for a, b in zip(edges[::2], edges[1::2]):
+        stretch = np.degrees(np.unwrap(np.radians(deg[a:b])))
+        deg[a:b] = stretch - 360.0 * np.floor(np.median(stretch) / 360.0)
+    return deg
+
+
 def footprint_centre(mask) -> np.ndarray:
     """(2,) image position (x, y) of the footprint's centroid: where the direction arrow starts."""
     rows, cols = np.nonzero(np.asarray(mask, bool))

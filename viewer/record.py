@@ -183,7 +183,7 @@ def send_track(rec, track: TactileTrack, scene: Scene, gain: float) -> None:
     rec.log(f"flow/{track.finger}/{track.view}/direction", rr.SeriesLines(names=f"{track.finger} {track.view} (deg)"),
             static=True)
     rec.send_columns(f"flow/{track.finger}/{track.view}/direction", col, rr.Scalars.columns(
-        scalars=draw.direction_deg(track.direction, track.magnitude, scene.noise)))
+        scalars=draw.unwrap_stretches(draw.direction_deg(track.direction, track.magnitude, scene.noise))))
     rec.send_columns(f"flow/{track.finger}/{track.view}/magnitude", col,
                      rr.Scalars.columns(scalars=track.magnitude.astype(float)))
 
