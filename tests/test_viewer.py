@@ -222,6 +222,26 @@ def test_the_live_viewer_shows_every_frame_the_monitor_processed(pour):
     assert [s for (s,) in rec.values("/live/slip", "StateChange:state")] == ["watching", "slip"]
 
 
+@pytest.mark.slow
+def test_web_serves_the_viewer_until_stopped(straws):
+    import socket
+    import urllib.request
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    proc = subprocess.Popen([sys.executable, "-c", "import sys; from viewer.cli import main; sys.exit(main(sys.argv[1:]))",
+                             str(straws["dir"]), "--web", "--port", str(port)], stdout=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()                          # printed once everything is sent
+        assert f"http://localhost:{port}" in line and "Ctrl-C" in line
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as page:
+            assert page.status == 200 and b"Rerun" in page.read()
+        assert proc.poll() is None                             # still serving
+    finally:
+        proc.terminate()
+        proc.wait(30)
+
+
 # ----------------------------------------------------------------------------- the live viewer's queue
 
 def test_the_live_viewer_drops_and_counts_when_it_cannot_keep_up_and_never_blocks(model, tmp_path, rng):

@@ -86,7 +86,8 @@ class LiveViewer:
         self.grids = {v: draw.arrow_grid(model.plans[v].mask, 3) for v in self.views}
         self._log_static()
         self.queue: queue.Queue = queue.Queue(maxsize=QUEUE_ITEMS)
-        self.offered = self.shown = self.dropped = self.events_dropped = 0
+        self.offered = self.dropped = self.events_dropped = 0     # the engine's thread counts these
+        self.shown = self.lost = 0                                # the viewer's thread these
         self._next_image = -np.inf
         self._slip = None                          # the latched verdict last sent
         self._stop = threading.Event()
@@ -124,11 +125,18 @@ class LiveViewer:
         run's attrs."""
         self._stop.set()
         self.thread.join(timeout_s)
+        left = 0                                   # what a stuck thread never took
+        while True:
+            try:
+                item = self.queue.get_nowait()
+            except queue.Empty:
+                break
+            left += len(item[1]["time_live"]) if item[0] == "rows" else 0
         self.rec.flush(timeout_sec=timeout_s)
         self.rec.disconnect()
         compact(self.path)
         return {"name": "rerun", "file": self.path.name, "display": self.display, "rows_offered": self.offered,
-                "rows_shown": self.shown, "rows_dropped": self.dropped + self.queue.qsize(),
+                "rows_shown": self.shown, "rows_dropped": self.dropped + self.lost + left,
                 "events_dropped": self.events_dropped, "queue_items": QUEUE_ITEMS, "error": self.error}
 
     # ------------------------------------------------------------------ the viewer's thread
@@ -146,6 +154,8 @@ class LiveViewer:
                     self._send(items)
                 except Exception as exc:  # noqa: BLE001 - the viewer must never take the run down
                     self.error = f"{type(exc).__name__}: {exc}"
+            if self.error is not None:            # after an error nothing more is sent: count it lost
+                self.lost += sum(len(it[1]["time_live"]) for it in items if it[0] == "rows")
             if stopping:
                 return
             time.sleep(DRAIN_S)
@@ -155,13 +165,13 @@ class LiveViewer:
         if rows:
             batch = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
             self._slip = send_live(self.rec, batch, self.fingers, self.views, self.noise, self._slip)
-            self.shown += len(batch["time_live"])
         images = [it[2] for it in items if it[0] == "rows" and it[2] is not None]
         if images:
             self._send_images(images)
         events = [it[1:] for it in items if it[0] == "event"]
         if events:
             send_events(self.rec, events)
+        self.shown += sum(len(r["time_live"]) for r in rows)      # counted once all of it is sent
 
     def _log_static(self) -> None:
         rr = self.rr
