@@ -75,6 +75,8 @@ class RunContext(Geometry):
 
     def event(self, kind: str, name: str, detail=None) -> None:
         self.recorder.event(kind, name, detail)
+        if self.live is not None:                 # the live viewer shows the steps and reactions
+            self.live.event(kind, name, detail)
 
     def _tick(self) -> None:
         """Advance one poll period; raise :class:`RunAborted` on a stop request and

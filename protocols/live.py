@@ -32,6 +32,7 @@ from tactile.pipeline import TactileConfig, TactileModel
 from tactile.slip import CAUSES, SlipConfig, SlipDetector
 
 ARROWS = "→↘↓↙←↖↑↗"          # image directions: +col is right, +row is down
+VIEWER_ENTRY_POINTS = "tactile_flow.live_viewer"     # live.viewer=NAME names one of these
 RESTART_FRAMES = 10          # frames numbered below the newest seen before a counter restart is believed
 
 
@@ -50,6 +51,10 @@ class LiveConfig:
             fall behind the stream.
         console_hz: updates per second of the operator's live line (0: none).
         slip: the detector's thresholds (:class:`tactile.slip.SlipConfig`).
+        viewer: ``None``, or the name of a live viewer (entry point group
+            :data:`VIEWER_ENTRY_POINTS`; ``rerun``: docs/viewer.md) that shows the monitor's
+            results as they come; it turns the monitor on. A viewer that cannot start (not
+            installed, no display) is one warning, and the run goes on.
     """
 
     enabled: Optional[bool] = None
@@ -57,6 +62,7 @@ class LiveConfig:
     views: list[str] = field(default_factory=lambda: ["bottom"])
     console_hz: float = 4.0
     slip: SlipConfig = field(default_factory=SlipConfig)
+    viewer: Optional[str] = None
 
 
 def live_fingers(cfg: LiveConfig, connected) -> tuple[str, ...]:
@@ -77,6 +83,30 @@ def live_settings(cfg) -> LiveConfig:
         raise ValueError(f"live.{unknown[0]}: unknown key; expected some of {[f.name for f in fields(LiveConfig)]}")
     values["slip"] = slip_config(values.get("slip") or {})
     return LiveConfig(**values)
+
+
+def viewer_names() -> list[str]:
+    """The live viewers installed (``live.viewer`` values)."""
+    from importlib.metadata import entry_points
+    return sorted(ep.name for ep in entry_points(group=VIEWER_ENTRY_POINTS))
+
+
+def open_viewer(name: str | None, fingers, model: TactileModel, run_dir, warn=print):
+    """The live viewer ``name`` (an entry point of :data:`VIEWER_ENTRY_POINTS`) for these fingers
+    and the model's views, or ``None``: none asked for, or it could not start (``warn`` gets one
+    line saying why; the run goes on without it)."""
+    if not name:
+        return None
+    from importlib.metadata import entry_points
+    found = {ep.name: ep for ep in entry_points(group=VIEWER_ENTRY_POINTS)}
+    try:
+        viewer = found[name].load()(fingers, model.config.views, model, run_dir)
+    except Exception as exc:  # noqa: BLE001 - a viewer must never stop the run
+        warn(f"live.viewer={name}: cannot start ({exc}); the run goes on without it")
+        return None
+    if getattr(viewer, "warning", None):
+        warn(viewer.warning)
+    return viewer
 
 
 def warm_up(model: TactileModel, views) -> None:
@@ -131,10 +161,13 @@ class LiveMonitor:
         cfg: the :class:`LiveConfig`.
         clock: the lab's clock (``now()``).
         display: callable taking the live line (or ``None``).
+        viewer: a live viewer (:func:`open_viewer`) offered every processed row and the engine's
+            events; it must return at once (it queues, and drops when behind), or ``None``.
     """
 
-    def __init__(self, biotac, recorder, model: TactileModel, cfg: LiveConfig, clock, display=None):
+    def __init__(self, biotac, recorder, model: TactileModel, cfg: LiveConfig, clock, display=None, viewer=None):
         self.cfg, self.recorder, self.model, self.clock, self.display = cfg, recorder, model, clock, display
+        self.viewer = viewer
         self.fingers = live_fingers(cfg, biotac.fingers)
         self.views = tuple(model.config.views)
         self.rows = [biotac.fingers.index(f) for f in self.fingers]
@@ -169,7 +202,16 @@ class LiveMonitor:
                "tap_overflows": self.tap.overflows, "slip": dict(vars(self.detector.config))}
         if self.flow is not None:
             out["counters"] = self.flow.counters()
+        if self.viewer is not None:
+            out["viewer"] = self.viewer.close()
+            if out["viewer"].get("rows_dropped"):
+                self.recorder.event("info", "live_viewer", out["viewer"])
         return out
+
+    def event(self, kind: str, name: str, detail=None) -> None:
+        """An engine event, passed on to the viewer (the recorder has it already)."""
+        if self.viewer is not None:
+            self.viewer.event(self.recorder.now(), kind, name, detail)
 
     # ------------------------------------------------------------------ per period
     def poll(self, still: bool | None = None):
@@ -184,7 +226,10 @@ class LiveMonitor:
                     self._rest_n += 1
             return None
         if frames:
-            self.recorder.live(self._process(frames))
+            rows = self._process(frames)
+            self.recorder.live(rows)
+            if self.viewer is not None:
+                self.viewer.offer(rows, self.flow)
         self._show()
         return self.detector.state
 

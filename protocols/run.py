@@ -22,7 +22,8 @@ from tactile.pipeline import TactileModel
 from . import provenance
 from .engine import FAILED, Outcome, RunEngine
 from .lab import make_lab
-from .live import LiveConfig, LiveMonitor, live_fingers, live_settings, tactile_config, terminal_display, warm_up
+from .live import (LiveConfig, LiveMonitor, live_fingers, live_settings, open_viewer, tactile_config, terminal_display,
+                   viewer_names, warm_up)
 from .plan import Plan, format_timeline, make_plan
 from .recorder import Recorder
 from .steps import ProtocolError
@@ -72,11 +73,13 @@ def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
                                 run_id=prov["run_id"], provenance=provenance.summary(prov),
                                 attrs={"labels": plan.labels, "plan_duration_s": plan.duration},
                                 live=(live_fingers(live, lab.biotac.fingers), model.config.views) if model else None)
+        viewer = open_viewer(live.viewer, live_fingers(live, lab.biotac.fingers), model, run_dir, console) if model \
+            else None
         recorder = Recorder(store, {"biotac": lab.biotac.read, "arm": lab.arm.read_states,
                                     "hand": lab.hand.read_states, "pump": lab.pump.read_states,
                                     "scale": lab.scale.read}, lab.clock).start()
         monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
-                              display=None if cfg.progress else terminal_display()) if model else None
+                              display=None if cfg.progress else terminal_display(), viewer=viewer) if model else None
         outcome = Outcome(FAILED, "the run engine could not start")
         try:
             outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=_bars(cfg.progress), log=console,
@@ -112,7 +115,11 @@ def live_setup(cfg, plan: Plan, build: bool = True) -> tuple[LiveConfig, Tactile
     if live.enabled is False and reacting:
         raise ProtocolError(reacting[0], "reacts to slip, but live.enabled=false turns the slip detector off; "
                                          "drop live.enabled=false or the step's until: slip / on_slip")
-    if not (live.enabled or reacting):
+    if live.viewer is not None and live.viewer not in viewer_names():
+        raise ConfigError("live.viewer", f"{live.viewer!r}: expected one of {viewer_names()} (or null)")
+    if live.enabled is False and live.viewer:
+        raise ConfigError("live.viewer", "shows the live monitor, which live.enabled=false turns off")
+    if not (live.enabled or reacting or live.viewer):
         return live, None
     unknown = [f for f in live.fingers or () if f not in cfg.hardware.fingers]
     if unknown:
