@@ -84,10 +84,7 @@ class Slide(Step):
     speed: float | None = None
 
     def values(self, ctx) -> tuple[float, float, float]:
-        p = ctx.params
-        return (p.direction_deg if self.direction_deg is None else self.direction_deg,
-                p.distance_mm if self.distance is None else self.distance,
-                p.speed_mm_s if self.speed is None else self.speed)
+        return tuple(_value(self, ctx, f, k)[0] for f, k in SLIDE_KEYS)
 
     def displacement(self, ctx, direction_deg: float, distance_mm: float, R_sensor) -> np.ndarray:
         """(2,) base-frame x, y (m) of the object's motion; the sensor plane must face the stage."""
@@ -99,17 +96,16 @@ class Slide(Step):
 
     def plan(self, ctx):
         ctx.require_stage(self.key)
-        direction, distance, speed = self.values(ctx)
+        (direction, k_dir), (distance, k_dist), (speed, k_speed) = (_value(self, ctx, f, k) for f, k in SLIDE_KEYS)
         if not math.isfinite(direction):
-            raise ProtocolError(f"{self.key}.direction_deg", f"expected a finite angle (deg), got {direction}")
-        _positive(distance, f"{self.key}.distance")
-        _stage_speed(ctx, speed * 1e-3, ctx.stage_cfg.max_speed_m_s, f"{self.key}.speed", "mm/s", 1e3,
-                     "max_speed_m_s")
+            raise ProtocolError(k_dir, f"expected a finite angle (deg), got {direction}")
+        _positive(distance, k_dist)
+        _stage_speed(speed * 1e-3, ctx.stage_cfg.max_speed_m_s, k_speed, "mm/s", 1e3, "max_speed_m_s")
         ctx.stage_pose[:2] += self.displacement(ctx, direction, distance, ctx.sensor_rotation())
         limit = ctx.stage_cfg.max_travel_m
         if np.any(np.abs(ctx.stage_pose[:2]) > limit + 1e-12):
             where = np.round(ctx.stage_pose[:2] * 1e3, 2).tolist()
-            raise ProtocolError(f"{self.key}.distance", f"takes the object stage to {where} mm from home, beyond "
+            raise ProtocolError(k_dist, f"takes the object stage to {where} mm from home, beyond "
                                                         f"hardware.stage.max_travel_m = {limit}")
         from .plan import trapezoid_time
         return _still(ctx, trapezoid_time(distance * 1e-3, speed * 1e-3, ctx.stage_cfg.accel_m_s2), self.key)
@@ -134,9 +130,7 @@ class Twist(Step):
     speed: float | None = None
 
     def values(self, ctx) -> tuple[float, float]:
-        p = ctx.params
-        return (p.rotation_deg if self.angle is None else self.angle,
-                p.rotation_speed_deg_s if self.speed is None else self.speed)
+        return tuple(_value(self, ctx, f, k)[0] for f, k in TWIST_KEYS)
 
     def stage_angle(self, angle_deg: float, R_sensor) -> float:
         """The stage's turn (rad about the base +z) for ``angle_deg`` about the sensor's −z."""
@@ -147,15 +141,15 @@ class Twist(Step):
 
     def plan(self, ctx):
         ctx.require_stage(self.key)
-        angle, speed = self.values(ctx)
+        (angle, k_angle), (speed, k_speed) = (_value(self, ctx, f, k) for f, k in TWIST_KEYS)
         if not (math.isfinite(angle) and angle != 0):
-            raise ProtocolError(f"{self.key}.angle", f"expected a non-zero angle (deg), got {angle}")
-        _stage_speed(ctx, math.radians(speed), ctx.stage_cfg.max_angular_speed_rad_s, f"{self.key}.speed",
-                     "deg/s", math.degrees(1), "max_angular_speed_rad_s")
+            raise ProtocolError(k_angle, f"expected a non-zero angle (deg), got {angle}")
+        _stage_speed(math.radians(speed), ctx.stage_cfg.max_angular_speed_rad_s, k_speed, "deg/s",
+                     math.degrees(1), "max_angular_speed_rad_s")
         ctx.stage_pose[2] += self.stage_angle(angle, ctx.sensor_rotation())
         limit = ctx.stage_cfg.max_rotation_rad
         if abs(ctx.stage_pose[2]) > limit + 1e-12:
-            raise ProtocolError(f"{self.key}.angle", f"turns the object stage {math.degrees(ctx.stage_pose[2]):.1f} "
+            raise ProtocolError(k_angle, f"turns the object stage {math.degrees(ctx.stage_pose[2]):.1f} "
                                                      f"deg from home, beyond hardware.stage.max_rotation_rad = {limit}")
         from .plan import trapezoid_time
         return _still(ctx, trapezoid_time(math.radians(abs(angle)), math.radians(speed),
@@ -190,7 +184,10 @@ class MoveObject(Step):
         return None
 
     def touch_s(self, ctx) -> float:
-        return ctx.params.distance_mm / ctx.params.speed_mm_s if self.duration is None else self.duration
+        if self.duration is not None:
+            return self.duration
+        _positive(ctx.params.speed_mm_s, "protocol.speed_mm_s")
+        return ctx.params.distance_mm / ctx.params.speed_mm_s
 
     def plan(self, ctx):
         inner = self.delegate(ctx)
@@ -207,7 +204,17 @@ class MoveObject(Step):
             ctx.lab.truth.touch(start, ctx.clock.now())
 
 
-def _stage_speed(ctx, value: float, limit: float, key: str, unit: str, scale: float, limit_key: str) -> None:
+SLIDE_KEYS = (("direction_deg", "direction_deg"), ("distance", "distance_mm"), ("speed", "speed_mm_s"))
+TWIST_KEYS = (("angle", "rotation_deg"), ("speed", "rotation_speed_deg_s"))
+
+
+def _value(s: Step, ctx, name: str, protocol_key: str) -> tuple[float, str]:
+    """The step's ``name`` parameter and its YAML key, or the protocol's default and its key."""
+    v = getattr(s, name)
+    return (ctx.params[protocol_key], f"protocol.{protocol_key}") if v is None else (v, f"{s.key}.{name}")
+
+
+def _stage_speed(value: float, limit: float, key: str, unit: str, scale: float, limit_key: str) -> None:
     """``value`` (SI) must be in (0, ``limit``]; the message gives it in the protocol's ``unit``."""
     if not (math.isfinite(value) and 0 < value <= limit + 1e-12):
         raise ProtocolError(key, f"expected a speed in (0, {limit * scale:g}] {unit} "

@@ -113,8 +113,8 @@ class Geometry:
 
     def require_stage(self, key: str) -> None:
         if self.stage_cfg is None:
-            raise ProtocolError(key, "needs an object stage to move the object, but this lab has none "
-                                     "(hardware.stage is not configured)")
+            raise ProtocolError(key, "needs an object stage, but this lab has none (hardware.stage is not "
+                                     "configured)")
 
     def sensor_rotation(self, pose=None) -> np.ndarray:
         """(3, 3) the protocol finger's sensor frame in the base frame, at TCP ``pose`` (default home)."""
