@@ -107,7 +107,7 @@ class Slide(Step):
             where = np.round(ctx.stage_pose[:2] * 1e3, 2).tolist()
             raise ProtocolError(k_dist, f"takes the object stage to {where} mm from home, beyond "
                                                         f"hardware.stage.max_travel_m = {limit}")
-        from .plan import trapezoid_time
+        from .plan import trapezoid_time          # (plan imports the step registry: import here)
         return _still(ctx, trapezoid_time(distance * 1e-3, speed * 1e-3, ctx.stage_cfg.accel_m_s2), self.key)
 
     def run(self, ctx):
@@ -151,7 +151,7 @@ class Twist(Step):
         if abs(ctx.stage_pose[2]) > limit + 1e-12:
             raise ProtocolError(k_angle, f"turns the object stage {math.degrees(ctx.stage_pose[2]):.1f} "
                                                      f"deg from home, beyond hardware.stage.max_rotation_rad = {limit}")
-        from .plan import trapezoid_time
+        from .plan import trapezoid_time          # (plan imports the step registry: import here)
         return _still(ctx, trapezoid_time(math.radians(abs(angle)), math.radians(speed),
                                           ctx.stage_cfg.angular_accel_rad_s2), self.key)
 

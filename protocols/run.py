@@ -79,7 +79,7 @@ def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
                                 stage=stage is not None)
         stored = store_baseline(store, baseline, lab.biotac.fingers)
         if getattr(lab, "truth", None) is not None:
-            lab.truth.conditions = _conditions(cfg, lab, stored)
+            lab.truth.conditions = _conditions(cfg, lab, stored, plan)
         sources = {"biotac": lab.biotac.read, "arm": lab.arm.read_states, "hand": lab.hand.read_states,
                    "pump": lab.pump.read_states, "scale": lab.scale.read}
         if stage is not None:
@@ -158,11 +158,15 @@ def hand_off(result: RunResult, analysis_cfg, console=print) -> dict | None:
     return analyze(result.store, analysis_cfg)
 
 
-def _conditions(cfg, lab, baseline: dict) -> dict:
-    """What the run was told, for the ground truth's ``conditions``."""
+def _conditions(cfg, lab, baseline: dict, plan: Plan) -> dict:
+    """What the run was told, for the ground truth's ``conditions`` (``press_force_n``: the first
+    ``press`` step's force, NaN without one)."""
     surface = lab.surface
     obj = (surface.cfg.name or surface.kind) if surface is not None else ""
-    return {"object": obj, "press_force_n": float(cfg.protocol.get("press_force", float("nan"))),
+    press = next((p.step for p in plan.steps if p.step.kind == "press"), None)
+    force = float("nan") if press is None else float(press.force if press.force is not None else
+                                                       cfg.protocol.press_force)
+    return {"object": obj, "press_force_n": force,
             "tare": bool(cfg.protocol.get("tare", True)), "baseline": baseline["method"]}
 
 

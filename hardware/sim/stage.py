@@ -76,8 +76,9 @@ class StageMotion:
 
     # -- commands ------------------------------------------------------------------
     def command(self, t: float, kind: str, amount, speed: float) -> float:
-        """Start a translation (``amount`` (dx, dy) m) or rotation (``amount`` rad); returns the end time."""
-        self.settle(t)
+        """Start a translation (``amount`` (dx, dy) m) or rotation (``amount`` rad) from where the
+        object is, at rest (a motion under way is replaced, as the arm's); returns the end time."""
+        self._settle(t)
         if kind == "translate":
             d = np.asarray(amount, float)
             dist = float(np.hypot(*d))
@@ -100,8 +101,8 @@ class StageMotion:
         stop = Trapezoid(t - abs(v) / accel, x - half, 2 * half, abs(v), accel)
         self.move = (kind, stop, *self.move[2:])
 
-    def settle(self, t: float) -> None:
-        """Fold the commanded motion up to ``t`` into the pose (the motion keeps running)."""
+    def _settle(self, t: float) -> None:
+        """Fold the commanded motion up to ``t`` into the pose."""
         self.xy, self.theta = self.commanded(t)
 
     def commanded(self, t: float) -> tuple[np.ndarray, float]:

@@ -23,8 +23,8 @@ from ..hand import JOINT_INDEX, JOINT_NAMES
 from . import grasp, motion, skin
 from .config import SimConfig
 from .contact import Fingertip, build_fingertip, point_forces, shear_loads
-from .stage import StageMotion
 from .geometry import pose_to_matrix, rotvec_to_matrix
+from .stage import StageMotion
 from .surfaces import Surface
 from .truth import GroundTruth
 
