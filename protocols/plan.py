@@ -65,7 +65,7 @@ class Geometry:
         self.R_tip = rotvec_to_matrix(tip[3:])
         fit = fit_ellipsoid(load_taxels())
         pole_sensor = (fit.centre + np.array([0.0, 0.0, -fit.axes[2]])) * 1e-3
-        self.pad_offset = rotvec_to_matrix(tip[3:]) @ pole_sensor + tip[:3]       # TCP frame, m
+        self.pad_offset = self.R_tip @ pole_sensor + tip[:3]                     # TCP frame, m
 
     def tcp_for_pad(self, pad_world) -> np.ndarray:
         """TCP pose putting the pad's lowest point at ``pad_world`` (3,) m."""

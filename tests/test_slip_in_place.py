@@ -316,7 +316,8 @@ def test_a_calibration_file_is_stored_and_a_bad_one_refused(tmp_path):
     path.write_text(json.dumps(cal))
     r = run_slip_in_place(tmp_path / "run", Condition("none", tare=False), baseline=str(path))
     tree = xr.open_datatree(str(r.store), engine="zarr")
-    assert tree.attrs["baseline"]["method"] == "calibration_file" and tree.attrs["calibration"]["th"]["sensor_id"] == "SN-th"
+    assert tree.attrs["baseline"]["method"] == "calibration_file"
+    assert tree.attrs["calibration"]["th"]["sensor_id"] == "SN-th"
     assert np.all(tree["biotac/baseline"].values == 3000.0)
     r = run_slip_in_place(tmp_path / "none", Condition("none", tare=False), baseline=None)
     tree = xr.open_datatree(str(r.store), engine="zarr")

@@ -70,15 +70,24 @@ def kohm(counts) -> np.ndarray:
 
 
 def read_grasps(path) -> tuple[np.ndarray, np.ndarray]:
-    """``objects`` (N,) str and ``electrodes`` (N, 3, 24) counts (ff, mf, th) of one grasp CSV."""
+    """``objects`` (N,) str and ``electrodes`` (N, 3, 24) counts (ff, mf, th) of one grasp CSV.
+    A missing column or a cell that is not a number is a ``ValueError`` naming the file and line."""
     with open(path, newline="") as fh:
         rows = list(csv.reader(fh))
-    head = rows[0]
-    cols = [[head.index(f"{f}_biotac_{k}") for k in range(1, 25)] for f in FINGERS]
-    data = rows[1:]
-    objects = np.array([r[head.index("object")] for r in data])
-    e = np.array([[[float(r[c]) for c in fc] for fc in cols] for r in data])
-    return objects, e
+    head = rows[0] if rows else []
+    names = ["object"] + [f"{f}_biotac_{k}" for f in FINGERS for k in range(1, 25)]
+    missing = [n for n in names if n not in head]
+    if missing:
+        raise ValueError(f"{path}: no column {missing[0]} (expected object and <finger>_biotac_1..24 of ff, mf, th)")
+    cols = [head.index(n) for n in names[1:]]
+    objects, e = [], []
+    for line, r in enumerate(rows[1:], start=2):
+        try:
+            e.append([float(r[c]) for c in cols])
+        except (ValueError, IndexError):
+            raise ValueError(f"{path}: line {line} is not a row of electrode counts") from None
+        objects.append(r[head.index("object")])
+    return np.array(objects), np.array(e).reshape(len(e), len(FINGERS), 24)
 
 
 def unloaded_state(e: np.ndarray, rng: np.random.Generator) -> dict:
@@ -219,8 +228,8 @@ def derive(directory, seed: int = 0) -> dict:
     level = np.digitize(pooled["sum_drop_counts"], cuts)
     groups = {name: {k: quantiles(v[level == g]) for k, v in pooled.items()} | {"contacts": int((level == g).sum())}
               for g, name in enumerate(("light", "mid", "firm"))}
-    per_finger = {f: {k: quantiles(v[fingers == f]) for k, v in pooled.items()} | {"contacts": int((fingers == f).sum())}
-                  for f in FINGERS}
+    per_finger = {f: {k: quantiles(v[fingers == f]) for k, v in pooled.items()}
+                  | {"contacts": int((fingers == f).sum())} for f in FINGERS}
     far = _far_field(np.concatenate(far_x), np.concatenate(far_y), np.concatenate(far_group), rng)
     rest_sigma = np.concatenate([s[5] for s in sensors])
     return {

@@ -326,7 +326,8 @@ def validate(cfg: SimConfig, key: str = "hardware") -> SimConfig:
     _positive(s, f"{key}.sensor", ["drift_tau_s", "kernel_sigma_mm", "saturation_load_n", "shear_length_mm",
                                    "pdc_counts_per_n", "pdc_saturation_n"])
     _nonneg(s, f"{key}.sensor", ["noise_scale", "drift_scale", "baseline_jitter_counts", "shear_gain",
-                                 "far_rise_per_n", "contact_noise_fraction", "shear_kohm_per_n", "pac_gain_per_n_s", "pac_slip_gain", "tac_counts_per_n",
+                                 "far_rise_per_n", "contact_noise_fraction", "shear_kohm_per_n",
+                                 "pac_gain_per_n_s", "pac_slip_gain", "tac_counts_per_n",
                                  "latency_s", "clock_drift_ppm", "calibration_drift_counts",
                                  "calibration_common_drift_counts"])
     _positive(s, f"{key}.sensor", ["calibration_rest_s"])
