@@ -38,7 +38,8 @@ from .sim import Lab
 from .sim.config import WorkspaceConfig, build, to_plain
 from .sim.surfaces import load_surface
 
-TOP_KEYS = ("backend", "fingers", "workspace", "arm", "fingertips", "rosbridge", "hand", "biotac", "pump", "scale")
+TOP_KEYS = ("backend", "fingers", "workspace", "arm", "fingertips", "rosbridge", "hand", "biotac", "pump", "scale",
+            "biotac_calibration")
 BIOTAC_SOURCES = ("rosbridge", "serial")
 #: arm keys the planner and the engine read; the rest go to the UR10 driver's config
 ARM_PLAN_KEYS = ("home_pose", "max_speed_m_s", "max_accel_m_s2", "stop_accel_m_s2", "max_contact_force_n")

@@ -191,6 +191,30 @@ class RunContext(Geometry):
     def limits_check(self, target) -> None:
         self.lab.arm.check_pose(np.asarray(target, float))
 
+    def tcp_force(self) -> float:
+        """Magnitude of the force on the tool now (N)."""
+        return float(np.linalg.norm(np.asarray(self.lab.arm.tcp_wrench(), float)[:3]))
+
+    def stage_move(self, start) -> None:
+        """Call ``start()`` (an asynchronous object stage command) and tick until the stage is still."""
+        start()
+        while self.lab.stage.is_moving():
+            self._tick()
+
+
+class _Unrecorded:
+    """Where the engine's events go before the recording starts (the setup of a run that starts
+    in contact): kept, then summarised in one ``setup`` event at the recording's start."""
+
+    def __init__(self, clock):
+        self.clock, self.events, self.t0 = clock, [], clock.now()
+
+    def event(self, kind: str, name: str, detail=None) -> None:
+        self.events.append((round(self.clock.now(), 4), kind, name, detail))
+
+    def write_failure(self, max_age_s: float = 2.0) -> None:
+        return None
+
 
 class RunEngine:
     """Runs a :class:`~protocols.plan.Plan` on a connected lab, recording as it goes."""
@@ -203,14 +227,23 @@ class RunEngine:
         self._display = live.display if live is not None else None
         self._interrupts = 0
 
-    def run(self) -> Outcome:
+    def run(self, start_recording=None) -> Outcome:
+        """Run the plan. The recorder is started already, or (``start_recording``, a callable)
+        after the plan's setup steps, which then run unrecorded (a run that starts in contact)."""
         done = 0
         with self._signals():
             try:
-                self.ctx.tare()
+                if start_recording is not None:
+                    recorder, self.ctx.recorder = self.ctx.recorder, _Unrecorded(self.ctx.clock)
+                    for planned in self.plan.steps[:self.plan.setup]:
+                        self._run_step(planned)
+                        done += 1
+                    self._start_recording(recorder, start_recording)
+                if self.cfg.protocol.get("tare", True):
+                    self.ctx.tare()
                 if self.ctx.live is not None:
                     self.ctx.live.begin()
-                for planned in self.plan.steps:
+                for planned in self.plan.steps[done:]:
                     self._run_step(planned)
                     done += 1
                 return Outcome(SUCCESS, steps_done=done)
@@ -235,6 +268,20 @@ class RunEngine:
                 return Outcome(FAILED, message, done)
             finally:
                 self._stop_pump()
+
+    def _start_recording(self, recorder, start) -> None:
+        """Drop what the devices buffered during the setup, start the recorder, and record the
+        setup as one ``setup`` event (its steps' events, clock times relative to the start)."""
+        setup = self.ctx.recorder
+        for read in recorder.sources.values():
+            read()
+        start()
+        self.ctx.recorder = recorder
+        t0 = recorder.t0
+        events = [(round(t - t0, 4), kind, name, detail) for t, kind, name, detail in setup.events]
+        self.ctx.event("info", "setup", {"steps": self.plan.setup, "events": events,
+                                         "pose": self.ctx.pose.round(5).tolist(),
+                                         "force_n": round(self.ctx.tcp_force(), 3)})
 
     def _run_step(self, planned: PlannedStep) -> None:
         step = planned.step
@@ -270,6 +317,8 @@ class RunEngine:
         try:
             arm.stop(self.ctx.limits.max_accel)
             self._stop_pump()
+            if getattr(self.lab, "stage", None) is not None:
+                self.lab.stage.stop()
             if not retract:
                 return
             self.ctx.stop_requested = False          # the retract itself must be allowed to run

@@ -60,10 +60,12 @@ class Geometry:
         self.surface = surface
         self.home = np.asarray(hw.arm.home_pose, float)
         self.R_tcp = rotvec_to_matrix(self.home[3:])
+        self.stage_cfg = hw.get("stage")          # the object stage's settings; None: the lab has none
         tip = np.asarray(hw.fingertips[finger], float)
+        self.R_tip = rotvec_to_matrix(tip[3:])
         fit = fit_ellipsoid(load_taxels())
         pole_sensor = (fit.centre + np.array([0.0, 0.0, -fit.axes[2]])) * 1e-3
-        self.pad_offset = rotvec_to_matrix(tip[3:]) @ pole_sensor + tip[:3]       # TCP frame, m
+        self.pad_offset = self.R_tip @ pole_sensor + tip[:3]                     # TCP frame, m
 
     def tcp_for_pad(self, pad_world) -> np.ndarray:
         """TCP pose putting the pad's lowest point at ``pad_world`` (3,) m."""
@@ -99,6 +101,26 @@ class Geometry:
         xy = s.origin[:2] + u * s.across[:2]
         return self.tcp_for_pad([xy[0], xy[1], s.max_z + height_mm * 1e-3])
 
+    def pose_above(self, ref: str, height_mm: float, key: str) -> np.ndarray:
+        """TCP pose with the pad ``height_mm`` above the surface top, over ``ref``: a surface
+        reference, or ``stage`` (the object stage's rotation axis)."""
+        if ref != "stage":
+            return self.pose_over(ref, 0.0, height_mm, key)
+        self.require_stage(key)
+        s = self._surface(key)
+        x, y = (float(v) for v in self.stage_cfg.axis_m)
+        return self.tcp_for_pad([x, y, s.max_z + height_mm * 1e-3])
+
+    def require_stage(self, key: str) -> None:
+        if self.stage_cfg is None:
+            raise ProtocolError(key, "needs an object stage, but this lab has none (hardware.stage is not "
+                                     "configured)")
+
+    def sensor_rotation(self, pose=None) -> np.ndarray:
+        """(3, 3) the protocol finger's sensor frame in the base frame, at TCP ``pose`` (default home)."""
+        R = self.R_tcp if pose is None else rotvec_to_matrix(np.asarray(pose, float)[3:6])
+        return R @ self.R_tip
+
     def pose_at_depth(self, pose, depth_mm: float) -> np.ndarray:
         """``pose`` lowered or raised so the pad is ``depth_mm`` below the surface top."""
         s = self._surface("approach")
@@ -133,6 +155,7 @@ class PlanContext(Geometry):
         self.time = 0.0
         self.pour_until = None
         self.joint_names = set(JOINT_NAMES)
+        self.stage_pose = np.zeros(3)      # planned object stage pose [x, y] m, [rz] rad from home
 
     def linear(self, target, speed_mm_s: float, key: str):
         """Plan a straight move at ``speed_mm_s``; check the target, speed and acceleration."""
@@ -148,7 +171,7 @@ class PlanContext(Geometry):
                                                   f"hardware.arm.max_accel_m_s2={self.limits.max_accel}")
         self.check_reachable(target, key)
         distance = float(np.linalg.norm(np.asarray(target[:3]) - self.pose[:3]))
-        duration = _trapezoid_time(distance, speed, accel)
+        duration = trapezoid_time(distance, speed, accel)
         self.pose = np.asarray(target, float).copy()
         self.time += duration
         return [self.pose.copy()], duration
@@ -171,6 +194,10 @@ class PlanContext(Geometry):
     def check_criterion(self, crit: Criterion | None, key: str) -> None:
         if crit is None:
             return
+        for name in ("pdc_rise", "contact_lost"):
+            if getattr(crit, name) is not None and not self.params.tare:
+                raise ProtocolError(f"{key}.{name}", "counts PDC from the tare, but protocol.tare=false starts the "
+                                                     "run in contact without one; use force instead")
         if crit.force is not None and not 0 < crit.force <= self.limits.max_force:
             raise ProtocolError(f"{key}.force", f"expected a force in (0, {self.limits.max_force}] N "
                                                 f"(hardware.arm.max_contact_force_n), got {crit.force}")
@@ -180,7 +207,7 @@ class PlanContext(Geometry):
                 raise ProtocolError(f"{key}.{name}", f"expected a threshold > 0 counts, got {value}")
 
 
-def _trapezoid_time(distance: float, speed: float, accel: float) -> float:
+def trapezoid_time(distance: float, speed: float, accel: float) -> float:
     """Duration (s) of a rest-to-rest move with a trapezoidal (or triangular) speed profile."""
     if distance <= 0:
         return 0.0
@@ -191,9 +218,13 @@ def _trapezoid_time(distance: float, speed: float, accel: float) -> float:
 
 @dataclass
 class Plan:
+    """The checked timeline. ``setup``: how many leading steps run before the recording starts
+    (``protocol.tare: false``: the steps up to the first ``press`` make the contact unrecorded)."""
+
     protocol: str
     steps: list[PlannedStep]
     labels: list[str]
+    setup: int = 0
 
     @property
     def duration(self) -> float:
@@ -238,13 +269,27 @@ def make_plan(cfg) -> Plan:
             planned.append(PlannedStep(len(planned), s, start, duration, waypoints))
 
     walk(steps)
-    return Plan(protocol=params.name, steps=planned, labels=list(params.labels))
+    return Plan(protocol=params.name, steps=planned, labels=list(params.labels), setup=_setup_steps(params, planned))
+
+
+def _setup_steps(params, planned: list[PlannedStep]) -> int:
+    """Steps before the recording: none with a tare; without, the steps up to the first press."""
+    if params.tare:
+        return 0
+    presses = [p.index for p in planned if p.step.kind == "press"]
+    if not presses:
+        raise ProtocolError("protocol.tare", "false starts the run in contact, but no step makes the contact: "
+                                             "add a `press` step (it and the steps before it run before the "
+                                             "recording starts)")
+    return presses[0] + 1
 
 
 def format_timeline(plan: Plan) -> str:
     """The plan as a table: step, start, expected duration, parameters, waypoints."""
     lines = [f"protocol {plan.protocol}: {len(plan.steps)} steps, expected {plan.duration:.1f} s; "
-             f"analysis labels: {', '.join(plan.labels) or '-'}",
+             f"analysis labels: {', '.join(plan.labels) or '-'}"
+             + (f"; the first {plan.setup} step(s) make the contact before the recording (no tare)"
+                if plan.setup else ""),
              f"{'#':>3}  {'step':<10} {'start s':>8} {'dur s':>7}  parameters / TCP waypoints (m)"]
     for p in plan.steps:
         lines.append(f"{p.index:>3}  {p.step.kind:<10} {p.start:>8.2f} {p.duration:>7.2f}  {p.step.describe()}")

@@ -39,7 +39,7 @@ from .store import RunStore, utc_now
 
 log = logging.getLogger(__name__)
 
-STREAMS = ("biotac", "arm", "hand", "pump", "scale")
+STREAMS = ("biotac", "arm", "hand", "pump", "scale", "stage")
 _I16 = np.iinfo(np.int16)
 
 
@@ -108,6 +108,14 @@ def scale_columns(readings) -> dict[str, np.ndarray]:
             "stable": np.array([r.stable for r in readings], bool)}
 
 
+def stage_columns(states) -> dict[str, np.ndarray]:
+    return {"device_time": np.array([s.device_time for s in states], float),
+            "host_time": np.array([s.host_time for s in states], float),
+            "pose": np.array([s.pose for s in states], float).reshape(-1, 3),
+            "velocity": np.array([s.velocity for s in states], float).reshape(-1, 3),
+            "moving": np.array([s.moving for s in states], bool)}
+
+
 @dataclass(frozen=True)
 class Layout:
     """Where a stream goes: its store block, its time coordinate and raw time columns."""
@@ -123,7 +131,8 @@ LAYOUTS = {"biotac": Layout("biotac", "time", "device_time", "host_time", biotac
            "arm": Layout("arm", "time_arm", "controller_time", "host_time", arm_columns),
            "hand": Layout("hand", "time_hand", "device_time", "host_time", hand_columns),
            "pump": Layout("pump", "time_pump", "pump_device_time", "pump_host_time", pump_columns),
-           "scale": Layout("scale", "time_scale", "scale_device_time", "scale_host_time", scale_columns)}
+           "scale": Layout("scale", "time_scale", "scale_device_time", "scale_host_time", scale_columns),
+           "stage": Layout("stage", "time_stage", "device_time", "host_time", stage_columns)}
 PAC_LAYOUT = Layout("biotac_pac", "time_pac", "device_time", "host_time", pac_columns)
 
 

@@ -20,6 +20,7 @@ from tactile.geometry import load_taxels
 from tactile.pipeline import TactileModel
 
 from . import provenance
+from .calibration import session_baseline, store_baseline
 from .engine import FAILED, Outcome, RunEngine
 from .lab import make_lab
 from .live import (LiveConfig, LiveMonitor, live_fingers, live_settings, open_viewer, tactile_config, terminal_display,
@@ -64,6 +65,8 @@ def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
         return RunResult("planned", run_dir, plan)
 
     lab = make_lab(cfg)
+    baseline = session_baseline(cfg.hardware, lab)
+    stage = getattr(lab, "stage", None)
     run_dir.mkdir(parents=True, exist_ok=True)
     store_path = run_dir / "run.zarr"
     with lab:
@@ -71,19 +74,28 @@ def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
                                   _calibration(lab), cfg.hardware.get("seed"), protocol=plan.protocol)
         store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
                                 run_id=prov["run_id"], provenance=provenance.summary(prov),
-                                attrs={"labels": plan.labels, "plan_duration_s": plan.duration},
-                                live=(live_fingers(live, lab.biotac.fingers), model.config.views) if model else None)
+                                attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
+                                       "tare": bool(cfg.protocol.get("tare", True))},
+                                live=(live_fingers(live, lab.biotac.fingers), model.config.views) if model else None,
+                                stage=stage is not None)
         viewer = open_viewer(live.viewer, live_fingers(live, lab.biotac.fingers), model, run_dir, console) if model \
             else None
-        recorder = Recorder(store, {"biotac": lab.biotac.read, "arm": lab.arm.read_states,
-                                    "hand": lab.hand.read_states, "pump": lab.pump.read_states,
-                                    "scale": lab.scale.read}, lab.clock).start()
+        stored = store_baseline(store, baseline, lab.biotac.fingers)
+        if getattr(lab, "truth", None) is not None:
+            lab.truth.conditions = _conditions(cfg, lab, stored, plan)
+        sources = {"biotac": lab.biotac.read, "arm": lab.arm.read_states, "hand": lab.hand.read_states,
+                   "pump": lab.pump.read_states, "scale": lab.scale.read}
+        if stage is not None:
+            sources["stage"] = stage.read_states
+        recorder = Recorder(store, sources, lab.clock)
+        if not plan.setup:
+            recorder.start()
         monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
                               display=None if cfg.progress else terminal_display(), viewer=viewer) if model else None
         outcome = Outcome(FAILED, "the run engine could not start")
         try:
             outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=_bars(cfg.progress), log=console,
-                                live=monitor).run()
+                                live=monitor).run(start_recording=recorder.start if plan.setup else None)
         finally:
             attrs = {"error": outcome.error}
             if monitor is not None:
@@ -112,6 +124,10 @@ def live_setup(cfg, plan: Plan, build: bool = True) -> tuple[LiveConfig, Tactile
     except (ValueError, TypeError) as exc:
         raise ConfigError("live", str(exc)) from None
     reacting = plan.slip_steps()
+    if not cfg.protocol.get("tare", True) and (live.enabled or reacting):
+        what = f"{reacting[0]} reacts to slip" if reacting else "live.enabled=true"
+        raise ProtocolError("protocol.tare", f"false starts the run in contact without a tare, but {what}: the "
+                                             f"live monitor needs a tare at rest")
     if live.enabled is False and reacting:
         raise ProtocolError(reacting[0], "reacts to slip, but live.enabled=false turns the slip detector off; "
                                          "drop live.enabled=false or the step's until: slip / on_slip")
@@ -147,6 +163,18 @@ def hand_off(result: RunResult, analysis_cfg, console=print) -> dict | None:
         return None
     analyze = next(iter(found)).load()
     return analyze(result.store, analysis_cfg)
+
+
+def _conditions(cfg, lab, baseline: dict, plan: Plan) -> dict:
+    """What the run was told, for the ground truth's ``conditions`` (``press_force_n``: the first
+    ``press`` step's force, NaN without one)."""
+    surface = lab.surface
+    obj = (surface.cfg.name or surface.kind) if surface is not None else ""
+    press = next((p.step for p in plan.steps if p.step.kind == "press"), None)
+    force = float("nan") if press is None else float(press.force if press.force is not None else
+                                                       cfg.protocol.press_force)
+    return {"object": obj, "press_force_n": force,
+            "tare": bool(cfg.protocol.get("tare", True)), "baseline": baseline["method"]}
 
 
 def _calibration(lab) -> dict:

@@ -41,6 +41,18 @@ class ProtocolConfig:
     grasp_flexion: float = 1.2         # rad, summed over the two flexion joints of each finger
     tighten_flexion: float = 0.2       # rad, added to each finger's closure by a `tighten` reaction
     hold_time: float = 1.0             # s
+    tare: bool = True                  # false: the run starts in contact, without a tare (see `press`)
+    # slip in place (conf/protocol/slip_in_place.yaml): the object moved under the still finger
+    press_force: float = 1.3           # N, the `press` step's force
+    motion: str = "none"               # translate | rotate | none (`move_object`)
+    direction_deg: float = 0.0         # the object's motion relative to the finger, sensor x–y plane (0° = +x)
+    distance_mm: float = 4.0           # mm
+    speed_mm_s: float = 5.0            # mm/s
+    rotation_deg: float = 30.0         # deg, + = counter-clockwise seen from outside the pad (about sensor −z)
+    rotation_speed_deg_s: float = 40.0 # deg/s
+    tremor_mm: float = 0.0             # the held object's jitter (std): tangential, mm (simulated stage)
+    tremor_normal_mm: float = 0.0      # ... normal, mm: the force fluctuation
+    tremor_deg: float = 0.0            # ... about the vertical, deg
     steps: list[Any] = field(default_factory=list)
 
 

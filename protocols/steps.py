@@ -555,3 +555,6 @@ def _convert(value, annotation: str, key: str) -> Any:
         if opt.startswith("dict[") and isinstance(value, dict):
             return {str(k): _convert(v, "float", f"{key}.{k}") for k, v in value.items()}
     raise ProtocolError(key, f"expected {annotation.replace('None', 'null')}, got {value!r}")
+
+
+from . import object_steps  # noqa: E402,F401  (registers press, slide, twist, move_object)

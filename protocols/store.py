@@ -38,7 +38,8 @@ AXIS6 = ("x", "y", "z", "rx", "ry", "rz")
 
 #: nominal sample rates (Hz), used only to size chunks
 NOMINAL_RATE_HZ = {"biotac": 100.0, "biotac_pac": PAC_RATE_HZ, "arm": 500.0, "hand": 100.0,
-                   "pump": 10.0, "scale": 10.0, "live": 100.0}
+                   "pump": 10.0, "scale": 10.0, "live": 100.0, "stage": 100.0}
+STAGE_AXES = ("x", "y", "rz")
 EVENTS_CHUNK = 256
 
 
@@ -76,9 +77,10 @@ def _time_vars(dim: str, device_name: str, host_name: str, what: str,
             Var(host_name, (dim,), "f8", "s", f"host receipt time of the {what} sample since run start"))
 
 
-def run_schema(chunk_s: float = 5.0, live: bool = False) -> dict[str, Block]:
+def run_schema(chunk_s: float = 5.0, live: bool = False, stage: bool = False) -> dict[str, Block]:
     """The blocks of a run store, by name (``biotac``, ``biotac_pac``, ``arm``, ``hand``,
-    ``pump``, ``scale``, ``events``, and with ``live`` the online tactile flow ``live``).
+    ``pump``, ``scale``, ``events``, with ``live`` the online tactile flow ``live``, with
+    ``stage`` the object stage's ``stage``).
     ``chunk_s``: seconds of data per chunk at the nominal rate. Non-leading dimensions
     (finger, taxel, axis6, joint, live_finger, view) are sized at creation."""
     def chunk(name):
@@ -134,6 +136,15 @@ def run_schema(chunk_s: float = 5.0, live: bool = False) -> dict[str, Block]:
     ]
     if live:
         blocks.append(_live_block(chunk("live")))
+    if stage:
+        blocks.append(Block("stage", "stage", "time_stage", chunk("stage"), (
+            *_time_vars("time_stage", "device_time", "host_time", "object stage",
+                        "stage controller timestamp (device clock)"),
+            Var("pose", ("time_stage", "stage_axis"), "f8", "m, rad",
+                "object stage pose [x, y] m from home (robot base axes) and rotation rz rad about +z "
+                "(counter-clockwise seen from above)"),
+            Var("velocity", ("time_stage", "stage_axis"), "f8", "m s-1, rad s-1", "object stage velocity"),
+            Var("moving", ("time_stage",), "bool", "1", "a commanded stage motion is under way"))))
     return {b.name: b for b in blocks}
 
 
@@ -163,6 +174,7 @@ def _live_block(chunk: int) -> Block:
 def _coords(fingers: tuple[str, ...], live) -> dict[str, dict[str, tuple]]:
     """Fixed coordinate variables by group: name -> (values, units, long_name)."""
     finger = (np.array(fingers, dtype=str), "", "finger (Shadow order)")
+    stage = {"stage_axis": (np.array(STAGE_AXES, dtype=str), "", "object stage pose / velocity component")}
     live_coords = {} if not live else {"live": {
         "live_finger": (np.array(live[0], dtype=str), "", "finger processed online (Shadow order)"),
         "view": (np.array(live[1], dtype=str), "", "tactile-frame view (tactile.frames)")}}
@@ -170,7 +182,8 @@ def _coords(fingers: tuple[str, ...], live) -> dict[str, dict[str, tuple]]:
                        "taxel": (np.arange(1, N_TAXELS + 1, dtype=np.int16), "1", "taxel number (SynTouch)")},
             "biotac_pac": {"finger": finger},
             "arm": {"axis6": (np.array(AXIS6, dtype=str), "", "pose / twist / wrench component")},
-            "hand": {"joint": (np.array(JOINT_NAMES, dtype=str), "", "Shadow Hand joint name")}}
+            "hand": {"joint": (np.array(JOINT_NAMES, dtype=str), "", "Shadow Hand joint name")},
+            "stage": stage}
 
 
 def jsonable(obj):
@@ -227,17 +240,19 @@ class RunStore:
     @classmethod
     def create(cls, path, *, protocol: str, fingers=FINGERS, run_id: str | None = None,
                provenance: dict | None = None, attrs: dict | None = None,
-               chunk_s: float = 5.0, live: tuple | None = None) -> "RunStore":
+               chunk_s: float = 5.0, live: tuple | None = None, stage: bool = False) -> "RunStore":
         """Create ``path`` (must not exist) with every group, coordinate and empty variable,
         root attributes (``run_id``, ``protocol``, ``status="running"``, ``start_time``,
         ``schema_version``, ``provenance``) and commit it. ``live``: ``(fingers, views)``
-        of the online tactile flow, to add the ``live`` group."""
+        of the online tactile flow, to add the ``live`` group; ``stage``: add the object
+        stage's ``stage`` group."""
         path = Path(path)
         if path.exists():
             raise FileExistsError(f"run store {path} already exists")
         fingers = tuple(fingers)
-        schema = run_schema(chunk_s, live=bool(live))
-        sizes = {"finger": len(fingers), "taxel": N_TAXELS, "axis6": 6, "joint": len(JOINT_NAMES)}
+        schema = run_schema(chunk_s, live=bool(live), stage=stage)
+        sizes = {"finger": len(fingers), "taxel": N_TAXELS, "axis6": 6, "joint": len(JOINT_NAMES),
+                 "stage_axis": len(STAGE_AXES)}
         if live:
             sizes.update(live_finger=len(live[0]), view=len(live[1]))
         root = zarr.open_group(str(path), mode="w-", zarr_format=3)
@@ -377,6 +392,17 @@ class RunStore:
             g.attrs.update(jsonable(attrs or {}))
             _write_tree(g, tree, group.rsplit("/", 1)[-1])
 
+    def write_variable(self, group: str, name: str, values, dims: tuple[str, ...], units: str, long_name: str,
+                       **attrs) -> None:
+        """Write a fixed (non-growing) variable once, e.g. ``biotac/baseline`` (finger, taxel)."""
+        values = np.asarray(values)
+        with self._lock:
+            self._check_open()
+            a = self._root[group].create_array(name, shape=values.shape, chunks=values.shape, dtype=values.dtype,
+                                               dimension_names=list(dims),
+                                               attributes=jsonable({"units": units, "long_name": long_name, **attrs}))
+            a[...] = values
+
     def commit(self) -> None:
         """Publish every append and attribute change: one atomic rewrite of the root
         metadata (consolidated metadata of all nodes)."""
@@ -431,8 +457,8 @@ async def _append_arrays(items) -> None:
 
 
 # ------------------------------------------------------------------------ tree writing
-_UNIT_SUFFIXES = (("_m_s", "m s-1"), ("_mm", "mm"), ("_m", "m"), ("_rad", "rad"), ("_n", "N"),
-                  ("_g", "g"), ("_ml", "ml"), ("_s", "s"))
+_UNIT_SUFFIXES = (("_m_s", "m s-1"), ("_mm_s", "mm s-1"), ("_deg_s", "degree s-1"), ("_mm", "mm"), ("_m", "m"),
+                  ("_rad", "rad"), ("_deg", "degree"), ("_n", "N"), ("_g", "g"), ("_ml", "ml"), ("_s", "s"))
 _TIME_NAMES = {"start", "end", "entry", "exit", "centre_time", "time", "pour_start", "slip_onset",
                "rotation", "downward", "full_slip"}
 

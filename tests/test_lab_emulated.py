@@ -59,8 +59,10 @@ def emulated_lab():
 
 @pytest.fixture(scope="module")
 def sim_schema(tmp_path_factory):
-    """The schema of the same protocol run on the simulated lab (ground truth aside)."""
-    sim = run_protocol(_cfg("hardware=sim", "protocol=straws_sweep", *FAST), tmp_path_factory.mktemp("sim"),
+    """The schema of the same protocol run on the simulated lab (ground truth aside), configured
+    as the lab: no object stage, no stored calibration."""
+    sim = run_protocol(_cfg("hardware=sim", "protocol=straws_sweep", "hardware.stage=null",
+                            "hardware.biotac_calibration=null", *FAST), tmp_path_factory.mktemp("sim"),
                        console=lambda *a: None)
     assert sim.status == "success"
     return _schema(sim.store)

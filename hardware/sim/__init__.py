@@ -16,18 +16,20 @@ from dataclasses import dataclass
 from .clock import SimClock
 from .config import SimConfig, load_config
 from .devices import SimArm, SimBiotac, SimHand, SimPump, SimScale
+from .stage_device import SimStage
 from .surfaces import Surface, SurfaceConfig, load_surface
 from .truth import GroundTruth
 from .world import SimWorld
 
 __all__ = ["Lab", "make_sim_lab", "SimConfig", "SurfaceConfig", "load_config", "load_surface",
-           "SimWorld", "SimClock", "SimArm", "SimHand", "SimBiotac", "SimPump", "SimScale",
+           "SimWorld", "SimClock", "SimArm", "SimHand", "SimBiotac", "SimPump", "SimScale", "SimStage",
            "Surface", "GroundTruth"]
 
 
 @dataclass
 class Lab:
-    """Every device of a lab plus, for a simulated one, its world and ground truth.
+    """Every device of a lab (``stage`` only where an object stage is configured) plus, for a
+    simulated one, its world and ground truth.
 
     ``with lab:`` connects every device and closes them all on exit.
     """
@@ -41,10 +43,12 @@ class Lab:
     world: SimWorld | None = None
     truth: GroundTruth | None = None
     surface: Surface | None = None
+    stage: SimStage | None = None            # the object stage, if the lab has one
 
     @property
     def devices(self):
-        return {"arm": self.arm, "hand": self.hand, "biotac": self.biotac, "pump": self.pump, "scale": self.scale}
+        out = {"arm": self.arm, "hand": self.hand, "biotac": self.biotac, "pump": self.pump, "scale": self.scale}
+        return out | ({"stage": self.stage} if self.stage is not None else {})
 
     def connect(self) -> None:
         for d in self.devices.values():
@@ -83,4 +87,4 @@ def make_sim_lab(cfg=None, surface=None, *, hardware_key: str = "hardware",
     clock = SimClock(world, realtime=c.realtime)
     return Lab(arm=SimArm(world, clock), hand=SimHand(world, clock), biotac=SimBiotac(world, clock),
                pump=SimPump(world, clock), scale=SimScale(world, clock), clock=clock, world=world,
-               truth=world.truth, surface=surf)
+               truth=world.truth, surface=surf, stage=SimStage(world, clock) if c.stage is not None else None)

@@ -17,7 +17,7 @@ from typing import Any, Optional
 from ..biotac import FINGERS, check_fingers
 from ..errors import ConfigError
 
-DEVICES = ("arm", "hand", "biotac", "pump", "scale")
+DEVICES = ("arm", "hand", "biotac", "pump", "scale", "stage")
 
 
 def _default_fingertips() -> dict[str, list[float]]:
@@ -55,8 +55,11 @@ class ContactConfig:
     """Fingertip skin and friction."""
     stiffness_n_mm2: float = 0.08         # local pressure = k · indentation^exponent (N/mm², mm)
     exponent: float = 1.5                 # Hertz-like
-    friction: float = 0.6                 # sliding friction coefficient
+    friction: float = 0.6                 # sliding (kinetic) friction coefficient
+    friction_static: float = 0.8          # static friction: the skin sticks to a moved object up to μs·F
     slip_speed_m_s: float = 0.001         # speed at which sliding friction is fully developed
+    skin_shear_modulus_n_mm2: float = 0.08  # G*: tangential stiffness 8G*a, torsional (16/3)G*a³ (Mindlin)
+    stick_slip: bool = True               # after a slip the skin sticks again (stick-slip of a pulled object)
     mesh_theta: int = 28                  # ellipsoid sampling (contact half): rings
     mesh_phi: int = 56                    # points per ring
 
@@ -69,18 +72,50 @@ class SensorModelConfig:
     drift_scale: float = 1.0
     drift_tau_s: float = 600.0            # warm-up drift settles with this time constant
     baseline_jitter_counts: float = 40.0  # per-taxel spread added to the real baselines
-    kernel_sigma_mm: float = 3.0          # taxel's spatial sensitivity to pressure
-    impedance_per_n: float = 12.0         # kΩ of electrode impedance per N of taxel load
-    shear_gain: float = 0.3               # taxel load per N of shear (leading +, trailing -)
+    # contact response, calibrated on real contact frames (biotac_contact_calibration.json)
+    kernel_sigma_mm: float = 2.5          # width of a taxel's footprint (Gaussian, mm)
+    saturation_load_n: float = 3.0        # footprint load (N) at which an electrode bottoms out
+    far_rise_per_n: float = 0.023         # relative impedance drop of all electrodes per N of force
+    contact_noise_fraction: float = 0.005 # extra noise: this share of the load's impedance change
+    shear_kohm_per_n: float = 12.0        # kΩ of electrode impedance per N-equivalent of shear load
+    shear_gain: float = 0.3               # shear load per N of traction (leading +, trailing -)
     shear_length_mm: float = 6.0
-    far_rise_per_n: float = 0.01          # relative impedance drop of all electrodes per N
     pdc_counts_per_n: float = 140.0
     pdc_saturation_n: float = 20.0
     pac_gain_per_n_s: float = 15.0        # PAC counts per N/s of force change
     pac_slip_gain: float = 15.0           # PAC noise std (counts) per N of sliding friction
     tac_counts_per_n: float = 4.0         # heat flow into a touched object cools TAC
+    # the lab's per-sensor calibration (unloaded counts measured at the session's start) as
+    # simulated for hardware.biotac_calibration=simulated: the mean of a rest this long, off the
+    # sensor's unloaded counts at the run by a drift per electrode and one shared by all (std)
+    calibration_rest_s: float = 1.0
+    calibration_drift_counts: float = 10.0
+    calibration_common_drift_counts: float = 64.0
     latency_s: float = 0.0015             # host receipt after device time
     clock_drift_ppm: float = 20.0
+
+
+@dataclass
+class StageConfig:
+    """Object stage under the board (``hardware/stage.py``): XY translation + rotary stage.
+
+    The surface sits on it; its rotation axis passes through ``axis_m`` (base frame x, y, m)
+    at home. ``tremor_*``: the jitter of the object it holds (std of an AR(1) with
+    ``tremor_tau_s``): tangential (mm), normal (mm: the force fluctuation) and angular (deg);
+    0 for a board resting on a still stage, the hand's or robot's tremor for a held object
+    (``conf/hardware/sim.yaml`` takes them from the protocol's ``tremor_*`` keys)."""
+    axis_m: list[float] = field(default_factory=lambda: [0.3, 0.0])
+    max_travel_m: float = 0.05            # each axis, from home
+    max_speed_m_s: float = 0.05
+    accel_m_s2: float = 0.5
+    max_rotation_rad: float = 3.2         # from home, either way
+    max_angular_speed_rad_s: float = 3.0
+    angular_accel_rad_s2: float = 30.0
+    rate_hz: float = 100.0
+    tremor_mm: float = 0.0
+    tremor_normal_mm: float = 0.0
+    tremor_deg: float = 0.0
+    tremor_tau_s: float = 0.03
 
 
 @dataclass
@@ -158,6 +193,8 @@ class SimConfig:
     pour: PourConfig = field(default_factory=PourConfig)
     pump: PumpConfig = field(default_factory=PumpConfig)
     scale: ScaleConfig = field(default_factory=ScaleConfig)
+    stage: Optional[StageConfig] = field(default_factory=StageConfig)   # null: no object stage
+    biotac_calibration: Optional[str] = "simulated"   # stored unloaded baseline: "simulated", a JSON file, null
     faults: FaultsConfig = field(default_factory=FaultsConfig)
 
 
@@ -270,12 +307,30 @@ def validate(cfg: SimConfig, key: str = "hardware") -> SimConfig:
     _nonneg(cfg.arm, f"{key}.arm", ["wrench_noise_n"])
     _positive(cfg.contact, f"{key}.contact", ["stiffness_n_mm2", "exponent", "slip_speed_m_s", "mesh_theta", "mesh_phi"])
     _nonneg(cfg.contact, f"{key}.contact", ["friction"])
+    _positive(cfg.contact, f"{key}.contact", ["friction_static", "skin_shear_modulus_n_mm2"])
+    if cfg.contact.friction > cfg.contact.friction_static:
+        raise ConfigError(f"{key}.contact.friction", f"the kinetic friction ({cfg.contact.friction}) cannot exceed "
+                                                     f"the static one (contact.friction_static = "
+                                                     f"{cfg.contact.friction_static})")
+    if cfg.stage is not None:
+        st = cfg.stage
+        if len(st.axis_m) != 2:
+            raise ConfigError(f"{key}.stage.axis_m", f"expected [x, y] (m), got {st.axis_m}")
+        _positive(st, f"{key}.stage", ["max_travel_m", "max_speed_m_s", "accel_m_s2", "max_rotation_rad",
+                                       "max_angular_speed_rad_s", "angular_accel_rad_s2", "rate_hz", "tremor_tau_s"])
+        _nonneg(st, f"{key}.stage", ["tremor_mm", "tremor_normal_mm", "tremor_deg"])
+        ticks = 1.0 / (st.rate_hz * cfg.step_s)
+        if abs(ticks - round(ticks)) > 1e-9 or round(ticks) < 1:
+            raise ConfigError(f"{key}.stage.rate_hz", "the period must be a whole number of step_s")
     s = cfg.sensor
-    _positive(s, f"{key}.sensor", ["drift_tau_s", "kernel_sigma_mm", "impedance_per_n", "shear_length_mm",
+    _positive(s, f"{key}.sensor", ["drift_tau_s", "kernel_sigma_mm", "saturation_load_n", "shear_length_mm",
                                    "pdc_counts_per_n", "pdc_saturation_n"])
     _nonneg(s, f"{key}.sensor", ["noise_scale", "drift_scale", "baseline_jitter_counts", "shear_gain",
-                                 "far_rise_per_n", "pac_gain_per_n_s", "pac_slip_gain", "tac_counts_per_n",
-                                 "latency_s", "clock_drift_ppm"])
+                                 "far_rise_per_n", "contact_noise_fraction", "shear_kohm_per_n",
+                                 "pac_gain_per_n_s", "pac_slip_gain", "tac_counts_per_n",
+                                 "latency_s", "clock_drift_ppm", "calibration_drift_counts",
+                                 "calibration_common_drift_counts"])
+    _positive(s, f"{key}.sensor", ["calibration_rest_s"])
     p = cfg.pour
     check_fingers(p.grasp_fingers, f"{key}.pour.grasp_fingers")
     _positive(p, f"{key}.pour", ["grip_n_per_rad", "friction_static", "partial_slip_ratio", "torsion_arm_m",

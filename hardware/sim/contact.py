@@ -4,8 +4,11 @@ The fingertip is the ellipsoid fitted to the 24 taxel positions (``tactile.geome
 sampled on its contact half (θ ∈ [π/2, π]). Each sample point carries an area (mm²).
 Against a height map, every point below the surface is indented by the vertical depth d
 (mm) and pushes with local pressure ``k·d^n`` (N/mm², a Winkler foundation with a
-Hertz-like exponent); summed over areas that is the normal force. Taxels see the
-point forces through a Gaussian kernel of the distance in the sensor frame.
+Hertz-like exponent); summed over areas that is the normal force. Each taxel feels the
+point forces within its footprint: a Gaussian of the distance in the sensor frame, weight
+1 at the taxel (so a taxel's load, N, does not depend on how finely the skin is sampled).
+The footprint width and the electrode's response to its load are calibrated on real contact
+frames (:mod:`hardware.sim.calibrate_contact`, ``docs/simulator.md``).
 """
 
 from __future__ import annotations
@@ -25,7 +28,8 @@ class Fingertip:
         points: (M, 3) points on the fitted ellipsoid (centre added), mm.
         area: (M,) area represented by each point, mm².
         taxels: (24, 3) taxel positions, mm.
-        kernel: (24, M) taxel sensitivity to a unit force at each point (rows sum to 1).
+        kernel: (24, M) taxel footprint: the share of a force at each point the taxel feels
+            (Gaussian of the distance, 1 at the taxel).
         pole: (3,) lowest point of the pad (θ = π), mm.
     """
 
@@ -63,7 +67,6 @@ def build_fingertip(n_theta: int = 28, n_phi: int = 56, sigma_mm: float = 3.0) -
     points = pts + fit.centre
     d2 = ((taxels[:, None, :] - points[None, :, :]) ** 2).sum(-1)
     kern = np.exp(-d2 / (2 * sigma_mm ** 2))
-    kern /= kern.sum(1, keepdims=True)
     pole = fit.centre + np.array([0.0, 0.0, -c])
     return Fingertip(points, area, taxels, kern, pole, fit.centre, fit.axes)
 
@@ -94,17 +97,34 @@ def shear_loads(taxels, centre, direction, shear_n: float, gain: float, length_m
     return np.where(s < 0, unload_ratio * s, s)
 
 
-def impedance_kohm(z0, load_n, total_n, impedance_per_n: float, far_rise_per_n: float) -> np.ndarray:
+def impedance_kohm(z0, load_n, shear_load, total_n, saturation_load_n: float, shear_kohm_per_n: float,
+                   far_rise_per_n: float) -> np.ndarray:
     """Electrode impedance (kΩ) under load.
 
-    ``z0`` (..., 24) resting impedance; ``load_n`` (..., 24) taxel load (N-equivalent,
-    may be negative where shear unloads); ``total_n`` (...,) total normal force. Pressed
-    electrodes rise with their load; all electrodes fall a little with the total force (fluid
-    displaced from the contact thickens over them, the real BioTac's far-field rise in
-    counts). Floored at 5 % of rest.
+    ``z0`` (..., 24) resting impedance; ``load_n`` (..., 24) normal load in each taxel's
+    footprint (N, ≥ 0); ``shear_load`` (..., 24) tangential load (N-equivalent, negative
+    where shear unloads); ``total_n`` (...,) total normal force.
+
+    The skin pressed towards an electrode thins the conductive fluid over it and the
+    impedance grows as 1 / thickness: ``z0 / (1 − load / saturation_load_n)`` (linear for light
+    loads, the electrode bottoming out as the load nears ``saturation_load_n``; floored at
+    0.2 % of the fluid, ~20 counts). Fluid displaced from the contact thickens over every
+    electrode: a relative fall of ``far_rise_per_n`` per N of total force (the real sensor's
+    far-field rise in counts). Skin stretch adds ``shear_kohm_per_n`` per N-equivalent of
+    shear load. Floored at 5 % of rest.
     """
     far = 1.0 - far_rise_per_n * np.asarray(total_n)[..., None]
-    return np.maximum(z0 * far + impedance_per_n * load_n, 0.05 * z0)
+    thin = np.maximum(1.0 - np.asarray(load_n) / saturation_load_n, THINNEST)
+    return np.maximum(z0 * far / thin + shear_kohm_per_n * np.asarray(shear_load), 0.05 * z0)
+
+
+THINNEST = 0.002     # fluid left over a bottomed-out electrode (share of rest): ~20 counts
+
+
+def contact_noise_kohm(z, z_unloaded, fraction: float) -> np.ndarray:
+    """Standard deviation (kΩ) of the extra electrode noise in contact: ``fraction`` of the
+    load's impedance change ``|z − z_unloaded|`` (micro-motion of the pressed skin)."""
+    return fraction * np.abs(np.asarray(z) - np.asarray(z_unloaded))
 
 
 def counts_from_impedance(z_kohm) -> np.ndarray:

@@ -274,6 +274,7 @@ class SimBiotac(_SimDevice, TactileSensors):
         super().__init__(world, clock, world.cfg.biotac_rate_hz)
         self._fingers = tuple(world.fingers)
         self.sensor = BiotacModel(self._fingers, world.cfg.sensor, self.rng, world.frame_dt)
+        self._session = self.sensor.session_calibration(world.rngs["calibration"])
         self.seq = 0
         f = world.cfg.faults
         self._dropout = [tuple(w) for w in f.biotac_dropout]
@@ -297,6 +298,12 @@ class SimBiotac(_SimDevice, TactileSensors):
         """Per-finger resting electrode baselines (counts) of this simulated sensor set."""
         return {f: self.sensor.baseline[i].copy() for i, f in enumerate(self._fingers)}
 
+    @property
+    def session_calibration(self) -> dict:
+        """Per-finger unloaded counts as the lab's calibration measured them before the run
+        (:meth:`BiotacModel.session_calibration`: a short rest, plus the drift since)."""
+        return {f: self._session[i].copy() for i, f in enumerate(self._fingers)}
+
     def _sample(self, t):
         if not self._producing():
             return
@@ -305,7 +312,7 @@ class SimBiotac(_SimDevice, TactileSensors):
         c = [w.contacts[f] for f in self._fingers]
         inp = SensorInputs(np.array([x.load for x in c]), np.array([x.force for x in c]),
                            np.array([w.force_rate[f] for f in self._fingers]),
-                           np.array([x.friction for x in c]))
+                           np.array([x.friction for x in c]), np.array([x.shear_load for x in c]))
         e, pdc, tdc, tac, pac = self.sensor.frame(t, inp)
         if any(t0 <= t < t1 for t0, t1 in self._dropout):
             return

@@ -82,6 +82,31 @@ def straws_sweep(lab: Lab, speed: float = 0.01, direction: int = +1, depth_m: fl
     return frames
 
 
+def press(lab: Lab, force_n: float, xy=None, finger: str = "ff", speed_m_s: float = 0.0005,
+          hold_s: float = 0.5, poll_s: float = 0.01) -> dict:
+    """Lower ``finger`` onto the surface at ``xy`` (base frame m; default the board's centre)
+    until its normal force reaches ``force_n`` (N), stop, and hold ``hold_s``.
+
+    Returns the streams recorded during the hold (see :func:`record`); the finger stays pressed.
+    """
+    x, y = lab.surface.origin[:2] if xy is None else xy
+    above = pad_height_pose(lab, x, y, -0.003, finger)
+    lab.arm.move_linear(above, 0.05, 0.5)
+    lab.arm.move_linear(pad_height_pose(lab, x, y, 0.008, finger), speed_m_s, 0.5, asynchronous=True)
+    while lab.world.contacts[finger].force < force_n:
+        if not lab.arm.is_moving():
+            raise RuntimeError(f"press: {finger} reached {lab.world.contacts[finger].force:.2f} N, not {force_n} N")
+        lab.clock.sleep(poll_s)
+    lab.arm.stop(2.0)
+    lab.clock.sleep(0.1)
+    frames: dict = {}
+    record(lab, frames)
+    frames = {}
+    lab.clock.sleep(hold_s)
+    record(lab, frames)
+    return frames
+
+
 def close_grasp(lab: Lab, flexion_rad: float, duration: float = 1.0) -> None:
     """Close the pour grasp fingers to a total flexion (two joints) of ``flexion_rad``."""
     from .grasp import FLEX_JOINTS

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from .config import SensorModelConfig
-from .contact import counts_from_impedance, impedance_from_counts, impedance_kohm, pdc_rise, quantise
+from .contact import (contact_noise_kohm, counts_from_impedance, impedance_from_counts, impedance_kohm, pdc_rise,
+                      quantise)
 
 TEMPLATE_OF_FINGER = {"ff": 0, "mf": 1, "th": 2, "rf": 0, "lf": 1}
 N_PAC = 22   # 2.2 kHz / 100 Hz
@@ -38,7 +39,8 @@ def load_calibration(name: str) -> dict:
 class SensorInputs:
     """Physical inputs of all fingers for one frame (F = number of fingers).
 
-    ``load``: (F, 24) taxel load N-equivalent; ``force``: (F,) total normal force N;
+    ``load``: (F, 24) normal load in each taxel's footprint, N; ``shear_load``: (F, 24) shear
+    load, N-equivalent (negative where it unloads); ``force``: (F,) total normal force N;
     ``force_rate``: (F,) dF/dt N/s; ``friction``: (F,) sliding friction force N.
     """
 
@@ -46,6 +48,7 @@ class SensorInputs:
     force: np.ndarray
     force_rate: np.ndarray
     friction: np.ndarray
+    shear_load: np.ndarray | None = None
 
 
 class BiotacModel:
@@ -81,6 +84,27 @@ class BiotacModel:
         tau = self.cfg.drift_tau_s
         return tau * (1.0 - np.exp(-t / tau))
 
+    def session_calibration(self, rng: np.random.Generator) -> np.ndarray:
+        """(F, 24) the lab's calibration of these sensors: their unloaded counts averaged over a
+        rest of ``calibration_rest_s`` taken at the session's start (AR(1) noise, as the frames),
+        off by the drift between that calibration and the run: per electrode
+        (``calibration_drift_counts``) and shared by a sensor's electrodes
+        (``calibration_common_drift_counts``), both normal with these standard deviations."""
+        c, F = self.cfg, self.F
+        n = max(1, int(round(c.calibration_rest_s / self.dt)))
+        ar = rng.standard_normal((F, 24)) * self.noise_std
+        total = np.zeros((F, 24))
+        for _ in range(n):
+            ar = self.phi * ar + rng.standard_normal((F, 24)) * self.noise_std * np.sqrt(1 - self.phi ** 2)
+            total += ar
+        drift = rng.normal(0, c.calibration_drift_counts, (F, 24)) + rng.normal(0, c.calibration_common_drift_counts,
+                                                                              (F, 1))
+        return self.rest_counts(0.0) + total / n + drift
+
+    def rest_counts(self, t: float) -> np.ndarray:
+        """(F, 24) noise-free unloaded electrode counts at time ``t`` (s): baseline + warm-up drift."""
+        return self.baseline + self.drift * self._warmup(t)
+
     def frame(self, t: float, inp: SensorInputs):
         """Counts for one frame at time ``t`` (s): electrodes (F, 24), pdc, tdc, tac (F,), pac (F, 22).
 
@@ -88,8 +112,12 @@ class BiotacModel:
         """
         c, rng, F = self.cfg, self.rng, self.F
         w = self._warmup(t)
-        rest = self.baseline + self.drift * w
-        z = impedance_kohm(impedance_from_counts(rest), inp.load, inp.force, c.impedance_per_n, c.far_rise_per_n)
+        rest = self.rest_counts(t)
+        z_rest = impedance_from_counts(rest)
+        shear = np.zeros_like(inp.load) if inp.shear_load is None else inp.shear_load
+        z = impedance_kohm(z_rest, inp.load, shear, inp.force, c.saturation_load_n, c.shear_kohm_per_n,
+                           c.far_rise_per_n)
+        z = z + rng.standard_normal((F, 24)) * contact_noise_kohm(z, z_rest, c.contact_noise_fraction * c.noise_scale)
         innov = rng.standard_normal((F, 24)) * self.noise_std * np.sqrt(1 - self.phi ** 2)
         self._ar = self.phi * self._ar + innov
         electrodes = quantise(counts_from_impedance(z) + self._ar)

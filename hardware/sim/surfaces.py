@@ -29,6 +29,7 @@ KINDS = ("straws", "sticks", "flat", "bump")
 class SurfaceConfig:
     """One board; kind-specific sizes are ignored by the other kinds (mm, deg, m)."""
     kind: str = "straws"
+    name: str = ""                        # what the object is called in the ground truth (default: kind)
     count: int = 3
     spacing_mm: float = 20.0
     angle_deg: float = 0.0

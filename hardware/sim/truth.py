@@ -13,6 +13,16 @@ rate (10 ms) unless stated. :meth:`GroundTruth.to_dict` gives plain arrays/dicts
 - ``features``: the surface's feature table (names, centres, width/height/length m, angle rad).
 - ``pour``: ``pour_start``, ``slip_onset``, ``rotation``, ``downward``, ``full_slip`` (NaN: never).
 - ``faults``: the faults injected (``kind``, ``time``, ``detail``).
+- ``object_motions``: one row per motion of the object under the fingers (the object stage's
+  ``translate``/``rotate``, or ``none``: a touch held still): ``kind``, ``finger`` (the one
+  pressing hardest at its start), ``start``, ``slip_onset`` (first frame the skin broke away:
+  slid or turned against friction; NaN if it never did), ``end``, ``force_n`` (that finger's
+  normal force at the start), ``direction_sensor_deg`` (the object's motion relative to the
+  finger in the sensor x–y plane, 0° = +x, 90° = +y; NaN unless translating),
+  ``direction_world_deg``, ``distance_mm``, ``speed_mm_s``, ``rotation_deg`` (+ =
+  counter-clockwise seen from outside the pad, i.e. about the sensor's −z), ``rotation_speed_deg_s``.
+- ``conditions``: what the run was told (set by the protocol): ``object``, ``press_force_n``,
+  ``tare`` (false: the record starts in contact), ``baseline`` (the stored calibration's method).
 """
 
 from __future__ import annotations
@@ -34,12 +44,16 @@ class GroundTruth:
         self.pour: dict[str, float] = {k: math.nan for k in
                                        ("pour_start", "slip_onset", "rotation", "downward", "full_slip")}
         self.faults: list[tuple[str, float, str]] = []
+        self._motions: list[dict] = []
+        self._force = {f: 0.0 for f in self.fingers}
+        self.conditions: dict = {}
 
     # --- updates (called by the world every frame) -----------------------------------
     def update_finger(self, t: float, finger: str, force: float, touching: set, pole_u: float,
                       v_world: np.ndarray, R_sensor: np.ndarray, sliding: bool):
         """Record one frame of one finger. ``R_sensor``: sensor→world rotation."""
         in_contact = force > self.threshold
+        self._force[finger] = force
         prev = self._prev.get(finger)
         # contact intervals
         if in_contact and (prev is None or not prev[3]):
@@ -91,6 +105,40 @@ class GroundTruth:
     def fault(self, kind: str, t: float, detail: str = ""):
         self.faults.append((kind, t, detail))
 
+    def object_motion(self, kind: str, start: float, end: float, finger: str, force_n: float, amount=None,
+                      speed: float = math.nan, R_sensor=None) -> None:
+        """A motion of the object under the fingers: ``translate`` by ``amount`` (dx, dy) m at
+        ``speed`` m/s, ``rotate`` by ``amount`` rad about the base +z at ``speed`` rad/s, or
+        ``none`` (a touch held still). ``R_sensor``: sensor→base rotation of ``finger``."""
+        nan = math.nan
+        row = {"kind": kind, "finger": finger, "start": start, "slip_onset": nan, "end": end, "force_n": force_n,
+               "direction_sensor_deg": nan, "direction_world_deg": nan, "distance_mm": 0.0, "speed_mm_s": nan,
+               "rotation_deg": 0.0, "rotation_speed_deg_s": nan}
+        R = np.eye(3) if R_sensor is None else np.asarray(R_sensor)
+        if kind == "translate":
+            d = np.r_[np.asarray(amount, float), 0.0]
+            ds = R.T @ d
+            row.update(direction_world_deg=math.degrees(math.atan2(d[1], d[0])),
+                       direction_sensor_deg=math.degrees(math.atan2(ds[1], ds[0])),
+                       distance_mm=float(np.linalg.norm(d)) * 1e3, speed_mm_s=speed * 1e3)
+        elif kind == "rotate":
+            # about the sensor's +z by amount·(z_sensor · z_base); + in the truth is about −z
+            row.update(rotation_deg=-math.degrees(float(amount) * R[2, 2]),
+                       rotation_speed_deg_s=math.degrees(speed))
+        self._motions.append(row)
+
+    def touch(self, start: float, end: float) -> None:
+        """A touch held still from ``start`` to ``end`` (s): an ``object_motions`` row of kind ``none``."""
+        finger = max(self._force, key=self._force.get) if self._force else ""
+        self.object_motion("none", start, end, finger, self._force.get(finger, 0.0))
+
+    def slipped(self, finger: str, t: float) -> None:
+        """The skin of ``finger`` broke away at ``t``: the slip onset of the motion under way."""
+        for m in reversed(self._motions):
+            if m["finger"] == finger and m["start"] <= t <= m["end"] + 1e-9 and math.isnan(m["slip_onset"]):
+                m["slip_onset"] = t
+                break
+
     # --- export --------------------------------------------------------------------------
     def to_dict(self) -> dict:
         """Plain numpy arrays and floats (see module docstring)."""
@@ -119,4 +167,11 @@ class GroundTruth:
             "faults": {"kind": np.array([f[0] for f in self.faults], dtype=str),
                        "time": np.array([f[1] for f in self.faults], float),
                        "detail": np.array([f[2] for f in self.faults], dtype=str)},
+            "object_motions": {k: np.array([m[k] for m in self._motions], dtype=str if k in ("kind", "finger")
+                                           else float) for k in MOTION_KEYS},
+            **({"conditions": dict(self.conditions)} if self.conditions else {}),
         }
+
+
+MOTION_KEYS = ("kind", "finger", "start", "slip_onset", "end", "force_n", "direction_sensor_deg",
+               "direction_world_deg", "distance_mm", "speed_mm_s", "rotation_deg", "rotation_speed_deg_s")

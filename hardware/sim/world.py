@@ -20,14 +20,15 @@ import numpy as np
 
 from ..biotac import FINGERS
 from ..hand import JOINT_INDEX, JOINT_NAMES
-from . import grasp, motion
+from . import grasp, motion, skin
 from .config import SimConfig
 from .contact import Fingertip, build_fingertip, point_forces, shear_loads
 from .geometry import pose_to_matrix, rotvec_to_matrix
+from .stage import StageMotion
 from .surfaces import Surface
 from .truth import GroundTruth
 
-DEVICE_STREAMS = ("arm", "hand", "biotac", "pump", "scale", "world")
+DEVICE_STREAMS = ("arm", "hand", "biotac", "pump", "scale", "world", "stage", "calibration")
 
 
 @lru_cache(maxsize=4)
@@ -39,8 +40,9 @@ def _fingertip(n_theta: int, n_phi: int, sigma: float) -> Fingertip:
 class FingerContact:
     """One finger's contact at one frame (sensor frame unless stated).
 
-    ``load``: (24,) taxel load N-equivalent (normal + shear); ``force``: normal force N;
-    ``friction``: sliding friction N; ``force_world``/``point_world``: (3,) for the wrench.
+    ``load``: (24,) normal load in each taxel's footprint, N; ``shear_load``: (24,) shear load
+    N-equivalent; ``force``: normal force N; ``friction``: sliding friction N;
+    ``force_world``/``point_world``: (3,) for the wrench.
     """
 
     load: np.ndarray
@@ -49,6 +51,11 @@ class FingerContact:
     force_world: np.ndarray = None
     point_world: np.ndarray = None
     shear: float = 0.0        # tangential load of a held object on the pad, N
+    shear_load: np.ndarray = None
+
+    def __post_init__(self):
+        if self.shear_load is None:
+            self.shear_load = np.zeros_like(self.load)
 
 
 class SimWorld:
@@ -97,6 +104,9 @@ class SimWorld:
         self._prev_shear = {f: 0.0 for f in FINGERS}
         self.force_rate = {f: 0.0 for f in FINGERS}
         self.truth = GroundTruth(self.fingers, surface)
+        # the object stage under the surface, and the skin each finger presses on it
+        self.stage = StageMotion(cfg.stage, self.rngs["stage"]) if cfg.stage is not None else None
+        self.skin = {f: skin.Skin() for f in FINGERS}
         # faults: (time, kind, device)
         fl = cfg.faults
         self.faults = []
@@ -258,6 +268,8 @@ class SimWorld:
         if pc.bottle_in_hand:
             grasp.step(self.grasp, t, dt, N, self.pump_rate if N > 0 else 0.0, pc)
             self.truth.update_pour(self.grasp.times)
+        if self.stage is not None:
+            self.stage.step(t, dt)
         # fingertip contacts
         p, R, v = self.arm_now
         for f in self.fingers:
@@ -281,26 +293,26 @@ class SimWorld:
     def _surface_contact(self, t, finger, ps, Rs, v_world) -> FingerContact:
         tip, cc, sc = self.tip, self.cfg.contact, self.cfg.sensor
         pts = tip.points_m
-        surf = self.surface
+        surf, stage = self.surface, self.stage
+        lift = stage.lift if stage is not None else 0.0
         pole_w = ps + Rs @ (tip.pole * 1e-3)
-        pole_u = float(surf.to_board(pole_w[0], pole_w[1])[0]) if surf is not None else 0.0
+        on_object = stage.to_object if stage is not None else (lambda x, y: (x, y))
+        pole_u = float(surf.to_board(*on_object(pole_w[0], pole_w[1]))[0]) if surf is not None else 0.0
         # bounding sphere of the ellipsoid first: most frames of most fingers touch nothing
-        far = surf is None or (ps[2] + Rs[2] @ tip.centre * 1e-3 - tip.axes.max() * 1e-3 >= surf.max_z)
+        top = surf.max_z + lift if surf is not None else 0.0
+        far = surf is None or (ps[2] + Rs[2] @ tip.centre * 1e-3 - tip.axes.max() * 1e-3 >= top)
         z = None if far else ps[2] + pts @ Rs[2]
-        if far or z.min() >= surf.max_z:
-            self.truth.update_finger(t, finger, 0.0, set(), pole_u, v_world, Rs, False)
-            return FingerContact(np.zeros(24))
+        if far or z.min() >= top:
+            return self._no_contact(t, finger, pole_u, v_world, Rs)
         x = ps[0] + pts @ Rs[0]
         y = ps[1] + pts @ Rs[1]
-        h, idx = surf.height_and_feature(x, y)
-        d_mm = np.maximum(h - z, 0.0) * 1e3
+        h, idx = surf.height_and_feature(*on_object(x, y))
+        d_mm = np.maximum(h + lift - z, 0.0) * 1e3
         pressed = d_mm > 0
         if not pressed.any():
-            self.truth.update_finger(t, finger, 0.0, set(), pole_u, v_world, Rs, False)
-            return FingerContact(np.zeros(24))
+            return self._no_contact(t, finger, pole_u, v_world, Rs)
         fp = point_forces(d_mm, tip.area, cc.stiffness_n_mm2, cc.exponent)
         F = float(fp.sum())
-        load = tip.kernel @ fp
         centre = fp @ tip.points / F
         v_s = Rs.T @ v_world
         v_t = v_s.copy()
@@ -308,16 +320,68 @@ class SimWorld:
         speed = float(np.linalg.norm(v_t))
         slide = math.tanh(speed / cc.slip_speed_m_s)
         friction = cc.friction * F * slide
+        shear = np.zeros(24)
         if speed > 0:
             u = v_t / speed
-            load = load + shear_loads(tip.taxels, centre, u, friction, sc.shear_gain, sc.shear_length_mm)
+            shear = shear_loads(tip.taxels, centre, u, friction, sc.shear_gain, sc.shear_length_mm)
         vw_t = v_world.copy()
         vw_t[2] = 0.0
         sw = float(np.linalg.norm(vw_t))
         f_world = np.array([0.0, 0.0, F]) - (friction * vw_t / sw if sw > 0 else 0.0)
+        if stage is None:
+            load = tip.kernel @ fp
+        else:
+            load, traction, stage_shear, slid = self._skin_contact(t, finger, pressed, fp, F, centre, ps, Rs)
+            shear = shear + stage_shear
+            f_world = f_world + traction
+            friction += cc.friction * F if slid else 0.0
         touching = set(np.unique(idx[pressed]).tolist()) - {-1}
         self.truth.update_finger(t, finger, F, touching, pole_u, v_world, Rs, speed > 1e-4)
-        return FingerContact(load, F, friction, f_world, ps + Rs @ (centre * 1e-3))
+        return FingerContact(load, F, friction, f_world, ps + Rs @ (centre * 1e-3), shear_load=shear)
+
+    def _no_contact(self, t, finger, pole_u, v_world, Rs) -> FingerContact:
+        self.skin[finger].relax()
+        self.truth.update_finger(t, finger, 0.0, set(), pole_u, v_world, Rs, False)
+        return FingerContact(np.zeros(24))
+
+    def _skin_contact(self, t, finger, pressed, fp, F, centre, ps, Rs):
+        """The skin on the object stage (:mod:`hardware.sim.skin`): step its stick/slip state by
+        the object's motion at the contact since the last frame and return the footprint loads
+        of the carried pressure (24,) N, the traction on the finger (3,) N (base frame), the
+        shear loads (24,) and whether the skin broke away."""
+        tip, cc, sc, sk = self.tip, self.cfg.contact, self.cfg.sensor, self.skin[finger]
+        c_world = ps + Rs @ (centre * 1e-3)
+        moved, turned = self.stage.moved(c_world[:2])
+        move_mm = (Rs.T @ np.r_[moved, 0.0])[:2] * 1e3
+        radius = math.sqrt(float(tip.area[pressed].sum()) / math.pi)
+        slid = skin.step(sk, move_mm, turned * Rs[2, 2], F, radius, cc.friction_static, cc.friction,
+                         cc.skin_shear_modulus_n_mm2, cc.stick_slip)
+        if slid:
+            self.truth.slipped(finger, t)
+        points = tip.points[pressed]
+        load = skin.footprint_loads(tip.taxels, skin.displaced(points, centre, sk), fp[pressed], sc.kernel_sigma_mm)
+        shear = np.zeros(24)
+        n = float(np.hypot(*sk.stretch))
+        if n > 0:
+            shear = shear_loads(tip.taxels, centre, np.r_[sk.stretch / n, 0.0], sk.traction_n, sc.shear_gain,
+                                sc.shear_length_mm)
+        if sk.twist:
+            shear = shear + skin.torsion_loads(tip.taxels, centre, points, fp[pressed],
+                                               math.copysign(sk.torque_n_mm, sk.twist), sc.shear_gain,
+                                               sc.shear_length_mm)
+        traction = Rs @ np.r_[sk.stretch / n * sk.traction_n, 0.0] if n > 0 else np.zeros(3)
+        return load, traction, shear, slid
+
+    def stage_command(self, kind: str, amount, speed: float) -> float:
+        """Start a stage motion (``translate``: (dx, dy) m; ``rotate``: rad about +z) and record it
+        in the ground truth; returns its end time (s)."""
+        t = self.time
+        end = self.stage.command(t, kind, amount, speed)
+        forces = {f: self.contacts[f].force for f in self.fingers}
+        finger = max(forces, key=forces.get) if forces else ""
+        Rs = self.arm_now[1] @ self.T_tcp_sensor[finger][:3, :3] if finger else np.eye(3)
+        self.truth.object_motion(kind, t, end, finger, forces.get(finger, 0.0), amount, speed, Rs)
+        return end
 
     def _grasp_patch(self, stretch_mm: float, rotation_rad: float):
         """(24,) taxel loads of a unit-force bottle patch, its centre (sensor, mm) and the bottle
@@ -357,9 +421,10 @@ class SimWorld:
         share = n_f / N
         shear = gs.skin_shear_n(pc) * share
         n_on = n_f * gs.normal_scale
-        load = n_on * unit + shear_loads(self.tip.taxels, centre, axis, shear, sc.shear_gain, sc.shear_length_mm)
         slipping = not math.isnan(gs.times["slip_onset"])
-        c.load = c.load + load
+        c.load = c.load + n_on * unit
+        c.shear_load = c.shear_load + shear_loads(self.tip.taxels, centre, axis, shear, sc.shear_gain,
+                                                  sc.shear_length_mm)
         c.force += n_on
         c.shear = shear
         # slip drives PAC: stick-slip of the sliding bottle excites it more than a smooth

@@ -1,0 +1,119 @@
+"""The skin under an object that moves against a still finger: stick, stretch, slip, twist.
+
+Pure functions on a small state (:class:`Skin`), sensor frame, mm and N:
+
+- the skin under the contact sticks to the object and moves with it (``stretch``, mm, in the
+  sensor x–y plane; ``twist``, rad about the sensor's +z), loading the skin elastically with
+  Mindlin's stiffnesses of a contact of radius ``a``: tangential ``k_t = 8·G*·a`` (N/mm),
+  torsional ``k_r = (16/3)·G*·a³`` (N·mm/rad);
+- when the traction ``k_t·|stretch|`` exceeds ``μs·F`` (or the torque ``k_r·|twist|`` exceeds
+  ``(3π/16)·μs·F·a``, a Hertzian patch's torsional capacity) the skin breaks away and slips
+  back to the kinetic level (``μk`` instead of ``μs``); with ``stick_slip`` it sticks again at
+  once and the next pull repeats the cycle (the stick-slip of a pulled object), else it rides
+  at the kinetic level while the object keeps moving;
+- what the electrodes see: the pressed skin (and its pressure) carried along by the stretch and
+  turned by the twist (:func:`displaced`), plus the traction's loads: ahead of the stretched
+  skin the skin bunches up and loads, behind it relaxes (:func:`hardware.sim.contact.shear_loads`);
+  for a twist every pressed point pushes along its own direction of motion, which for an
+  elongated patch loads two opposite quadrants and unloads the other two (:func:`torsion_loads`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+TORSION_CAPACITY = 3 * math.pi / 16      # torque capacity / (μ F a) of a Hertzian patch
+
+
+@dataclass
+class Skin:
+    """State of the skin under one finger's contact (sensor frame)."""
+
+    stretch: np.ndarray = field(default_factory=lambda: np.zeros(2))   # mm
+    twist: float = 0.0                                                  # rad about +z
+    traction_n: float = 0.0                                             # k_t·|stretch|, N
+    torque_n_mm: float = 0.0                                            # k_r·|twist|, N·mm
+    slipping: bool = False                                              # slid in the last step
+    twisting: bool = False                                              # turned against friction in the last step
+
+    def relax(self) -> None:
+        """Out of contact: the skin springs back."""
+        self.stretch = np.zeros(2)
+        self.twist = self.traction_n = self.torque_n_mm = 0.0
+        self.slipping = self.twisting = False
+
+
+def stiffness(radius_mm: float, shear_modulus: float) -> tuple[float, float]:
+    """Tangential (N/mm) and torsional (N·mm/rad) stiffness of a contact of radius ``radius_mm``."""
+    a = max(radius_mm, 0.1)
+    return 8.0 * shear_modulus * a, 16.0 / 3.0 * shear_modulus * a ** 3
+
+
+def step(skin: Skin, move_mm, turn_rad: float, force_n: float, radius_mm: float, mu_s: float, mu_k: float,
+         shear_modulus: float, stick_slip: bool = True) -> bool:
+    """Advance ``skin`` by the object's motion at the contact since the last step: ``move_mm``
+    (2,) and ``turn_rad``. Returns whether the skin broke away (slid or turned) in this step."""
+    if force_n <= 0:
+        skin.relax()
+        return False
+    kt, kr = stiffness(radius_mm, shear_modulus)
+    move = np.asarray(move_mm, float)
+    riding = not stick_slip and skin.slipping and float(np.hypot(*move)) > 0
+    s = skin.stretch + move
+    n = float(np.hypot(*s))
+    skin.slipping = riding or kt * n > mu_s * force_n
+    if skin.slipping and n > 0:
+        s = s / n * (mu_k * force_n / kt)
+    skin.stretch = s
+    skin.traction_n = kt * float(np.hypot(*s))
+    riding = not stick_slip and skin.twisting and turn_rad != 0
+    w = skin.twist + turn_rad
+    cap = TORSION_CAPACITY * force_n * radius_mm
+    skin.twisting = riding or kr * abs(w) > mu_s * cap
+    if skin.twisting:
+        w = math.copysign(mu_k * cap / kr, w)
+    skin.twist = w
+    skin.torque_n_mm = kr * abs(w)
+    return skin.slipping or skin.twisting
+
+
+def displaced(points, centre, skin: Skin) -> np.ndarray:
+    """(n, 3) ``points`` (mm) of the pressed skin carried by the stretch and turned by the twist
+    about ``centre`` (3,) in the sensor's x–y plane."""
+    p = np.asarray(points, float).copy()
+    c, s = math.cos(skin.twist), math.sin(skin.twist)
+    dx, dy = p[:, 0] - centre[0], p[:, 1] - centre[1]
+    p[:, 0] = centre[0] + c * dx - s * dy + skin.stretch[0]
+    p[:, 1] = centre[1] + s * dx + c * dy + skin.stretch[1]
+    return p
+
+
+def footprint_loads(taxels, points, forces, sigma_mm: float) -> np.ndarray:
+    """(24,) normal load (N) each taxel feels of the point ``forces`` (n,) at ``points`` (n, 3):
+    the Gaussian footprint of :func:`hardware.sim.contact.build_fingertip`."""
+    d2 = ((np.asarray(taxels)[:, None, :] - np.asarray(points)[None, :, :]) ** 2).sum(-1)
+    return np.exp(-d2 / (2 * sigma_mm ** 2)) @ np.asarray(forces, float)
+
+
+def torsion_loads(taxels, centre, points, forces, torque_n_mm: float, gain: float, length_mm: float,
+                  unload_ratio: float = 0.3) -> np.ndarray:
+    """(24,) taxel load (N-equivalent) of a torsional traction ``torque_n_mm`` (signed, about +z).
+
+    Each pressed point carries a share of the torque as a tangential traction along its own
+    direction of motion about ``centre``, ``t_q ∝ f_q·ẑ×(q − c)``; as for a translation
+    (:func:`hardware.sim.contact.shear_loads`) the skin ahead of the point along ``t_q`` loads
+    and behind it unloads (by ``unload_ratio``), fading over ``length_mm``.
+    """
+    q = np.asarray(points, float) - np.asarray(centre, float)
+    f = np.asarray(forces, float)
+    moment = float((f * (q[:, 0] ** 2 + q[:, 1] ** 2)).sum())
+    if moment <= 0 or torque_n_mm == 0:
+        return np.zeros(len(taxels))
+    t = torque_n_mm / moment * f[:, None] * np.stack([-q[:, 1], q[:, 0]], -1)        # (n, 2) N
+    off = np.asarray(taxels)[:, None, :2] - np.asarray(points)[None, :, :2]             # (24, n, 2)
+    fade = np.exp(-(off ** 2).sum(-1) / (2 * length_mm ** 2))
+    s = gain * ((off * t[None]).sum(-1) / length_mm * fade).sum(1)
+    return np.where(s < 0, unload_ratio * s, s)
