@@ -32,7 +32,7 @@ class Segmentation:
     merge_gap_s: float = 0.05
     prominence: float = 0.25
     distance_s: float = 0.5
-    plateau_level: float = 0.5
+    plateau_level: float = 0.55
     margin_s: float = 0.2
     settle_frames: int = 10
     load_fraction: float = 0.8
@@ -46,7 +46,7 @@ class Estimates:
 
 @dataclass(frozen=True)
 class Pour:
-    rotation_rad: float = 0.03
+    rotation_rad: float = 0.015
     trough_prominence: float = 0.15
 
 

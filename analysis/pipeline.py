@@ -150,7 +150,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
         for f, ivs in contacts.items():
             segments += lab.sweep_segments(f, T, ivs, bumps[f])
     elif scheme == lab.POUR:
-        pour = _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin, model)
+        pour = _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin)
     else:
         for f, ivs in contacts.items():
             segments += lab.generic_segments(f, T, ivs)
@@ -311,7 +311,7 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
     return out
 
 
-def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin, model) -> dict:
+def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dict:
     """Pour phases per grasp finger (its longest contact) and the run's onsets (median)."""
     rate = run.rate_hz
     pour_event = reaction = None
@@ -331,9 +331,7 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin, model)
         ref = None
         if cf is not None and cf.reference is not None:
             ref = cf.settled
-            # the bottle turns about the pad normal: the views that look along it see that turn
-            parts = [cf.views[v].static for v in cf.views if cf.views[v].static is not None
-                     and abs(model.plans[v].look[2]) > slp.PAD_NORMAL_COS]
+            parts = [cf.views[v].static for v in cf.views if cf.views[v].static is not None]
             if parts:
                 curl = np.mean([p.curl for p in parts], axis=0) / 2.0
                 rot[cf.window[0]:cf.window[1]] = seg.smooth(curl, rate, 0.5)
