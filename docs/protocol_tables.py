@@ -39,6 +39,7 @@ UNITS = {
     "height": "mm", "margin": "mm", "depth": "mm", "distance": "mm", "speed": "mm/s", "duration": "s",
     "flexion": "rad", "joints": "rad", "rate": "ml/min", "volume": "ml", "force": "N", "pose": "m, rad",
     "times": "1", "angle": "deg", "direction_deg": "deg", "pdc_rise": "counts", "contact_lost": "counts",
+    "dx": "mm", "dy": "mm", "dz": "mm",
     ("twist", "speed"): "deg/s",
 }
 # Fields whose default comes from the protocol in a way the source patterns below do not show.
