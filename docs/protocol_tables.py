@@ -99,10 +99,8 @@ def default(cls, f: dataclasses.Field) -> str:
 
 
 def doc_text(obj) -> str:
-    """An object's docstring as one markdown paragraph (its first)."""
-    text = inspect.getdoc(obj) or ""
-    para = text.split("\n\n")[0]
-    return " ".join(para.split()).replace("``", "`")
+    """An object's docstring as one markdown line."""
+    return " ".join((inspect.getdoc(obj) or "").split()).replace("``", "`")
 
 
 def steps_table() -> str:
