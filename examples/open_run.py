@@ -78,6 +78,7 @@ def segment_table(analysis: xr.DataTree) -> list[dict]:
 
 
 def plot(t, p, rows, finger: str, title: str, out: Path) -> None:
+    """``finger``'s pressure ``p`` (counts) over ``t`` (s), its segments as bands, saved to ``out``."""
     colours = {}
     fig, ax = plt.subplots(figsize=(10, 3.6), layout="constrained")
     for r in rows:
