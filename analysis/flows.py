@@ -194,10 +194,19 @@ def static_series(cf: ContactFlow, view: str, reference: str, model) -> tuple[np
 
 
 def combined_direction(cf: ContactFlow, start: int, stop: int, model, rate_hz: float):
-    """Confidence-weighted sum over views of the dynamic mean flow in the sensor frame (3,) mm/s."""
-    total = np.zeros(3)
+    """Confidence-weighted mean over views of the dynamic mean flow in the sensor frame (3,) mm/s.
+
+    Each sensor axis is averaged over the views that see it, each view weighted on axis k by
+    1 − look_k² (the share of axis k in its image plane: 1 for the two axes of an axis-aligned
+    view, 0 for the one it looks along). Summed instead, the bottom view's y would count once
+    against x three times (bottom, left, right), turning every direction off the finger's axis
+    toward x (a 45° sweep read as 9°)."""
+    total, weight = np.zeros(3), np.zeros(3)
     for v in cf.views:
         w = window_summary(cf, v, start, stop, model, rate_hz, "dynamic")
         if w is not None:
-            total += w["sensor"] * max(w["confidence"], 1e-3)
-    return total
+            seen = 1.0 - np.asarray(model.plans[v].look, float) ** 2
+            c = max(w["confidence"], 1e-3)
+            total += w["sensor"] * c
+            weight += seen * c
+    return np.divide(total, weight, out=np.zeros(3), where=weight > 0)
