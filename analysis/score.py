@@ -23,6 +23,9 @@ Scores:
   most: a translation's direction within 45° (``SLIP_DIRECTION_OK_DEG``) and classed
   ``translation``; a rotation's sense (the sign of ``rotation_deg``) and classed ``rotation``;
   touch vs slip (classed ``none`` exactly when the object was only touched); contact found.
+
+Targets apply only to what the protocol declares (its labels' scheme) and the truth contains:
+crossings of a sweep, phases of a pour, object motions under a still finger.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import math
 import numpy as np
 
 from . import estimates as est
+from . import labels as lab
 
 TARGETS = {"direction_correct_fraction": 1.0, "width_error_mm_median": 1.0, "boundary_error_ms_median": 50.0,
            "slip_onset_error_ms": 100.0}
@@ -50,7 +54,9 @@ def score(analysis, truth: dict) -> dict:
     from :func:`analysis.load.open_truth`."""
     t0 = truth.get("_t0", 0.0)
     out = {"crossings": [], "pour": {}, "summary": {}, "targets": {}}
-    fc = truth.get("feature_crossings", {})
+    # crossings are scored only where the protocol declared a sweep: a finger pressed on a
+    # cylinder or a bump crosses nothing it means to measure
+    fc = truth.get("feature_crossings", {}) if analysis.scheme == lab.SWEEP else {}
     feats = truth.get("features", {})
     sweeps = truth.get("sweeps", {})
     contacts = truth.get("contacts", {})
@@ -181,7 +187,8 @@ def score(analysis, truth: dict) -> dict:
     for key, limit in TARGETS.items():
         v = s.get(key)
         applicable = not (key == "slip_onset_error_ms" and not analysis.pour) and \
-            not (key in ("direction_correct_fraction", "width_error_mm_median") and not n_truth)
+            not (key in ("direction_correct_fraction", "width_error_mm_median") and not n_truth) and \
+            not (key == "boundary_error_ms_median" and not n_truth and not analysis.pour)
         if not applicable:
             continue
         if v is None:
