@@ -140,6 +140,7 @@ def cli_runs(tmp_path_factory):
         tree = xr.open_datatree(str(store), engine="zarr")
         key = (_motion(tree)["kind"], bool(tree["truth/conditions/tare"].values))
         runs[key] = (tree, json.loads((store.parent / "run.json").read_text()))
+        tree.attrs["_store"] = str(store)
     assert len(runs) == 6, sorted(runs)
     return runs
 
@@ -325,3 +326,25 @@ def test_a_calibration_file_is_stored_and_a_bad_one_refused(tmp_path):
     assert str(tree["truth/conditions/baseline"].values) == "none"
     with pytest.raises(ConfigError, match="hardware.biotac_calibration: no such file"):
         run_slip_in_place(tmp_path / "bad", Condition("none"), baseline=str(tmp_path / "missing.json"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["translate", "rotate", "none"])
+@pytest.mark.parametrize("tare", [True, False])
+def test_the_analysis_reads_the_slip_and_meets_its_targets(cli_runs, kind, tare, tmp_path):
+    """The recorded runs analysed as tactile-run hands them off: score.json's slip targets met
+    (direction within 45°, rotation sense, touch vs slip, contact found), and nothing else scored."""
+    import shutil
+
+    from analysis.run import analyze_run
+    tree, _ = cli_runs[(kind, tare)]
+    store = tmp_path / "run.zarr"
+    shutil.copytree(tree.attrs["_store"], store)
+    summary = analyze_run(store, {"figures": False, "progress": False}, console=lambda *a: None)
+    score = json.loads((tmp_path / "score.json").read_text())
+    assert score["all_targets_met"] is True, score["targets"]
+    assert set(score["targets"]) <= {"slip_direction_correct_fraction", "rotation_sense_correct_fraction",
+                                     "touch_vs_slip_correct_fraction", "contact_found_fraction"}
+    slip = summary["estimates"]["slip"]["ff"]
+    assert slip["slip_class"] == {"translate": "translation", "rotate": "rotation", "none": "none"}[kind]
+    assert slip["reference"] == ("contact_onset" if tare else "unloaded")
