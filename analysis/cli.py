@@ -107,10 +107,8 @@ def _app(cfg) -> None:
 
 
 def main() -> None:
-    try:
-        _app()
-    except SystemExit:
-        raise
+    from protocols.config_guard import run_app
+    run_app(_app)                   # a config file is data: one line for a bad one, exit 2
     sys.exit(_state["code"])
 
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 import csv
 import json
 import logging
-import os
 import sys
 import traceback
 from pathlib import Path
@@ -24,7 +23,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
-from . import resume
+from . import config_guard, resume
 from .run import hand_off, run_protocol
 from .schema import check_targets, register
 
@@ -93,26 +92,9 @@ def _app(cfg) -> None:
 
 def main() -> None:
     register()
-    # Hydra raises composition errors (unknown keys, bad YAML...) instead of printing its own
-    # traceback; they are bad input, reported here as one line.
-    os.environ["HYDRA_FULL_ERROR"] = "1"
     logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
-    try:
-        _app()
-    except Exception as exc:
-        if "verbose=true" in sys.argv[1:]:
-            traceback.print_exception(exc)
-        print(f"error: {one_line(exc)}", file=sys.stderr)
-        sys.exit(BAD_INPUT)
+    config_guard.run_app(_app)               # protocols are data: no Hydra settings, no code
     sys.exit(_exit["code"])
-
-
-def one_line(exc: BaseException) -> str:
-    """An exception and its cause as one line (Hydra's messages span several)."""
-    parts = [str(exc)]
-    if exc.__cause__ is not None and str(exc.__cause__) not in parts[0]:
-        parts.append(str(exc.__cause__))
-    return "; ".join(line.strip() for part in parts for line in part.splitlines() if line.strip())
 
 
 class SweepSummary(Callback):

@@ -21,6 +21,8 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import OmegaConf
 
+from protocols.config_guard import run_app
+
 from .importer import ImportSettings, import_source
 from .recording import ImportInputError
 
@@ -68,7 +70,7 @@ def _app(cfg) -> None:
 
 
 def main() -> None:
-    _app()
+    run_app(_app)                   # a config file is data: one line for a bad one, exit 2
     sys.exit(_exit["code"])
 
 
