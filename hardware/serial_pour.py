@@ -23,8 +23,8 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from .device import Clock, DeviceIdentity, WallClock
-from .errors import (DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError, NotConnectedError,
-                     require_positive)
+from .errors import (BUFFER_RANGE_S, RATE_RANGE_HZ, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
+                     NotConnectedError, require_positive, require_within)
 from .pour import Pump, PumpState, Scale, ScaleReading
 from .serial_biotac import open_serial
 
@@ -108,6 +108,8 @@ class SerialPumpConfig:
 
     def __post_init__(self):
         require_positive(self, ("max_rate_ml_min", "poll_hz", "timeout_s", "buffer_s"), self.key)
+        require_within(self, ("poll_hz",), RATE_RANGE_HZ, "Hz", self.key)
+        require_within(self, ("buffer_s",), BUFFER_RANGE_S, "s", self.key)
 
 
 class SerialPump(Pump):
@@ -287,6 +289,8 @@ class SerialScaleConfig:
 
     def __post_init__(self):
         require_positive(self, ("rate_hz", "first_reading_timeout_s", "stale_timeout_s", "timeout_s", "buffer_s"), self.key)
+        require_within(self, ("rate_hz",), RATE_RANGE_HZ, "Hz", self.key)
+        require_within(self, ("buffer_s",), BUFFER_RANGE_S, "s", self.key)
 
 
 class SerialScale(Scale):

@@ -21,7 +21,7 @@ from tactile.pipeline import TactileModel
 
 from . import provenance
 from .engine import FAILED, Outcome, RunEngine
-from .lab import make_lab
+from .lab import check_hardware, make_lab
 from .live import LiveConfig, LiveMonitor, live_fingers, live_settings, tactile_config, terminal_display, warm_up
 from .plan import Plan, format_timeline, make_plan
 from .recorder import Recorder
@@ -59,6 +59,7 @@ def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
     plan = make_plan(cfg)
     live, model = live_setup(cfg, plan, build=not cfg.plan_only)
     if cfg.plan_only:
+        check_hardware(cfg)
         console(format_timeline(plan))
         return RunResult("planned", run_dir, plan)
 
