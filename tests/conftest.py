@@ -1,5 +1,10 @@
+from pathlib import Path
+
 import numpy as np
 import pytest
+
+#: the real recordings the tests read (shipped with the project; attribution in DATA / "README.md")
+DATA = Path(__file__).resolve().parent / "data"
 
 
 @pytest.fixture(scope="session")

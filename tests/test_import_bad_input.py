@@ -11,9 +11,10 @@ from omegaconf import OmegaConf
 from protocols.importers import ImportInputError, ImportSettings, import_source
 from protocols.importers import writer as writer_mod
 from protocols.importers.cli import BAD_INPUT, FAILED, run
+from conftest import DATA
 
 CONF = Path(__file__).resolve().parents[1] / "conf" / "import.yaml"
-BAG = Path("/work/shared/data/biotac_rest_untouched.bag")
+BAG = DATA / "biotac_rest_untouched.bag"
 
 
 def electrode_csv(path: Path, n=50, prefix="", time=None, extra=(), drop=()) -> Path:
@@ -173,7 +174,6 @@ def test_cli_process_nonexistent_source(tmp_path):
     assert list(tmp_path.iterdir()) == []                           # no log file, no output directory
 
 
-@pytest.mark.skipif(not BAG.exists(), reason="the real resting bag is not available")
 def test_cli_process_imports_the_real_bag(tmp_path):
     r = subprocess.run([sys.executable, "-m", "protocols.importers.cli", f"source={BAG}", "out=imp"],
                        cwd=tmp_path, capture_output=True, text=True, timeout=60)
