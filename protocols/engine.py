@@ -4,7 +4,9 @@ Lifecycle (as Bluesky's RunEngine): ``running`` → one of
 
 - ``success``: every step ended;
 - ``aborted``: the operator stopped the run (Ctrl-C or SIGTERM once: the current motion is
-  stopped, the finger retracted, the store closed; Ctrl-C twice: stop at once, no retract);
+  stopped, the finger retracted, the store closed; Ctrl-C twice: stop at once, no retract;
+  a signal before the first step: the run stops there); the signals are owned by the run's
+  :class:`~protocols.interrupts.Interrupts` from its start to the last byte written;
 - ``failed``: a step raised (device fault, protective stop, criterion never met...): motion
   stopped, the pump stopped, a retract if the arm is free to move, the error recorded.
 
@@ -17,9 +19,7 @@ last one, so ``on_slip`` reactions are issued in the period after the frame that
 
 from __future__ import annotations
 
-import signal
-import threading
-from contextlib import contextmanager
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +28,7 @@ from hardware.errors import DeviceError, ProtectiveStopError
 from tactile.slip import CAUSES
 
 from .interlocks import InterlockTripped, Interlocks, SafetyConfig
+from .interrupts import Interrupts
 from .plan import Geometry, Limits, Plan, PlannedStep
 from .steps import Criterion
 
@@ -81,6 +82,7 @@ class RunContext(Geometry):
         :class:`~protocols.interlocks.InterlockTripped` when a safety limit is breached."""
         t0 = self.clock.now()
         self.clock.sleep(self.poll)
+        self.recorder.keep_up()                   # a simulated clock waits for the store to keep up
         if self.progress:
             self.progress(self.clock.now() - t0)
         if self.stop_requested:
@@ -191,19 +193,30 @@ class RunContext(Geometry):
 
 
 class RunEngine:
-    """Runs a :class:`~protocols.plan.Plan` on a connected lab, recording as it goes."""
+    """Runs a :class:`~protocols.plan.Plan` on a connected lab, recording as it goes.
 
-    def __init__(self, lab, recorder, cfg, plan: Plan, progress_factory=None, log=print, live=None):
+    ``interrupts``: the run's :class:`~protocols.interrupts.Interrupts` (installed by the
+    caller); without one the engine installs its own for the duration of :meth:`run`."""
+
+    def __init__(self, lab, recorder, cfg, plan: Plan, progress_factory=None, log=print, live=None,
+                 interrupts: Interrupts | None = None):
         self.lab, self.recorder, self.cfg, self.plan = lab, recorder, cfg, plan
         self.progress_factory = progress_factory
         self.log = log
         self.ctx = RunContext(lab, recorder, cfg, live=live)
         self._display = live.display if live is not None else None
-        self._interrupts = 0
+        self._own_interrupts = interrupts is None
+        self.interrupts = interrupts or Interrupts(log)
 
     def run(self) -> Outcome:
+        """Run every step; never raises past the safe stop (the outcome says what happened)."""
         done = 0
-        with self._signals():
+        installed = self.interrupts.installed() if self._own_interrupts else nullcontext()
+        with installed, self.interrupts.during("motion", on_stop=self._request_stop):
+            if self.interrupts.count:
+                self.ctx.event("abort", "operator", {"reason": "signal before the first step", "step": 0})
+                self._stop_pump()
+                return Outcome(ABORTED, "stopped by the operator before the first step", 0)
             try:
                 self.ctx.tare()
                 if self.ctx.live is not None:
@@ -219,7 +232,7 @@ class RunEngine:
             except RunAborted as exc:
                 self.ctx.event("abort", "operator", {"reason": str(exc), "step": done})
                 self._make_safe(retract=True)
-                reason = "stopped at once by a second Ctrl-C" if self._interrupts > 1 else str(exc)
+                reason = "stopped at once by a second Ctrl-C" if self.interrupts.motion_signals > 1 else str(exc)
                 return Outcome(ABORTED, reason, done)
             except KeyboardInterrupt:
                 self.ctx.event("abort", "operator", {"reason": "second Ctrl-C: immediate stop", "step": done})
@@ -229,10 +242,22 @@ class RunEngine:
                 message = f"{type(exc).__name__}: {exc}"
                 self.ctx.event("error", self.plan.steps[done].name if done < len(self.plan.steps) else "engine",
                                {"error": message, "step": done})
-                self._make_safe(retract=not self.lab.arm.is_protective_stopped())
+                self._make_safe(retract=self._arm_free())
                 return Outcome(FAILED, message, done)
             finally:
                 self._stop_pump()
+
+    def _request_stop(self) -> None:
+        self.ctx.stop_requested = True
+
+    def _arm_free(self) -> bool:
+        """Whether the arm can be moved away: not in a protective stop, and still answering
+        (a lost link is no reason to skip the stop, but it is one not to retract)."""
+        try:
+            return not self.lab.arm.is_protective_stopped()
+        except Exception as exc:                # noqa: BLE001 - whatever the driver raises
+            self.log(f"warning: the arm does not answer ({type(exc).__name__}: {exc}); not retracting")
+            return False
 
     def _run_step(self, planned: PlannedStep) -> None:
         step = planned.step
@@ -263,13 +288,18 @@ class RunEngine:
         self.ctx.event("step_end", planned.name, {"key": step.key})
 
     def _make_safe(self, retract: bool) -> None:
-        """Stop motion and the pump; optionally back the finger away along the approach."""
+        """Stop motion and the pump; optionally back the finger away along the approach.
+        Never raises: what could not be done is logged (the reason we stop comes first)."""
         arm = self.lab.arm
         try:
             arm.stop(self.ctx.limits.max_accel)
-            self._stop_pump()
-            if not retract:
-                return
+        except Exception as exc:                  # noqa: BLE001 - e.g. the link is gone
+            self.log(f"warning: could not stop the arm: {exc}")
+            retract = False
+        self._stop_pump()
+        if not retract:
+            return
+        try:
             self.ctx.stop_requested = False          # the retract itself must be allowed to run
             self._wait_still(SETTLE_S)
             target = self.ctx.pose
@@ -297,26 +327,3 @@ class RunEngine:
             self.lab.pump.stop()
         except Exception as exc:
             self.log(f"warning: could not stop the pump: {exc}")
-
-    @contextmanager
-    def _signals(self):
-        """Ctrl-C / SIGTERM once: stop safely; Ctrl-C twice: stop at once."""
-        if threading.current_thread() is not threading.main_thread():
-            yield
-            return
-
-        def on_signal(signum, frame):
-            self._interrupts += 1
-            if self._interrupts == 1:
-                self.ctx.stop_requested = True
-                self.log("\nstopping safely: finishing the current motion, retracting "
-                         "(Ctrl-C again to stop at once)")
-            else:
-                raise KeyboardInterrupt
-
-        old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            yield
-        finally:
-            for s, handler in old.items():
-                signal.signal(s, handler)

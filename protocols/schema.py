@@ -63,7 +63,7 @@ class RunConfig:
 
 
 # Classes a config may name with ``_target_`` (Hydra instantiates them); nothing else.
-ALLOWED_TARGETS = ("protocols.cli.SweepSummary",)
+ALLOWED_TARGETS = ("protocols.cli.SweepSummary", "protocols.cli.RunDirLock")
 
 
 def check_targets(node, key: str = "") -> None:
