@@ -100,13 +100,13 @@ def test_csv_missing_rate(tmp_path):
     assert "positive" in one_line_error(tmp_path, src, rate_hz=-3)
 
 
-def test_directory_with_one_bad_file_writes_nothing(tmp_path):
+def test_directory_whose_every_file_is_bad_writes_nothing(tmp_path):
     d = tmp_path / "session"
     d.mkdir()
-    electrode_csv(d / "a.csv")
+    electrode_csv(d / "a.csv", drop=("e3",))
     electrode_csv(d / "b.csv", extra=("oops",))
     msg = one_line_error(tmp_path, d, rate_hz=100)
-    assert "b.csv" in msg and "oops" in msg
+    assert "no file could be imported" in msg and "a.csv" in msg and "b.csv" in msg and "oops" in msg
 
 
 def test_calibration_without_a_finger(tmp_path):

@@ -41,6 +41,7 @@ import zarr
 
 from hardware.biotac import COUNTS_MAX, PAC_RATE_HZ
 from hardware.device import batch_times
+from protocols import rundir
 from protocols.clockmodel import ClockFit, latency_stats, sequence_gaps
 from protocols.provenance import write_run_json
 from protocols.store import RunStore, jsonable
@@ -264,14 +265,34 @@ def _iso(epoch_s: float) -> str | None:
 
 
 # ----------------------------------------------------------------------------- staging
+STAGING_MARK = ".importing-"
+
+
 def staging_dir(target: Path) -> Path:
-    """A fresh hidden directory beside ``target`` (same filesystem, so the rename is atomic)."""
+    """A fresh hidden directory beside ``target`` (same filesystem, so the rename is atomic),
+    locked by this process (:mod:`protocols.rundir`) until :func:`release_staging`, so that
+    :func:`remove_stale_staging` can tell a live import's staging from a killed one's."""
     target.parent.mkdir(parents=True, exist_ok=True)
-    path = Path(tempfile.mkdtemp(prefix=f".{target.name}.importing-", dir=target.parent))
+    path = Path(tempfile.mkdtemp(prefix=f".{target.name}{STAGING_MARK}", dir=target.parent))
+    rundir.acquire(path)
     umask = os.umask(0)
     os.umask(umask)
     path.chmod(0o777 & ~umask)                  # mkdtemp makes it 0700; the run directory is not private
     return path
+
+
+def release_staging(path: Path) -> None:
+    """Give back the lock of a staging directory (published, discarded or not)."""
+    rundir.release(path)
+
+
+def remove_stale_staging(folders) -> list[Path]:
+    """Remove the staging directories a killed import left in ``folders`` (no live process
+    holds their lock); returns them."""
+    stale = [p for folder in folders if Path(folder).is_dir() for p in sorted(Path(folder).glob(f".*{STAGING_MARK}*"))
+             if p.is_dir() and rundir.holder(p) is None]
+    discard(stale)
+    return stale
 
 
 def write_run(prepared: Prepared, staging: Path, provenance: dict, import_attrs: dict,
