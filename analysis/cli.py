@@ -114,7 +114,7 @@ def _app(cfg) -> None:
 
 
 def main() -> None:
-    from protocols.config_guard import run_app
+    from protocols.app import run_app
     run_app(_app)                   # a config file is data: one line for a bad one, exit 2
     sys.exit(_state["code"])
 

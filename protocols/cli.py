@@ -23,7 +23,8 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
-from . import config_guard, resume, rundir
+from . import resume, rundir
+from .app import run_app
 from .interrupts import Interrupts
 from .run import RunResult, hand_off, run_protocol
 from .schema import check_targets, register
@@ -143,7 +144,7 @@ def main() -> None:
     register()
     logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
     _interrupts.install()                    # the run owns Ctrl-C and SIGTERM (protocols.interrupts)
-    config_guard.run_app(_app)               # protocols are data: no Hydra settings, no code
+    run_app(_app)                            # protocols are data: no Hydra settings, no code
     sys.exit(_exit["code"])
 
 

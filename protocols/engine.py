@@ -207,10 +207,11 @@ class RunEngine:
         self._display = live.display if live is not None else None
         self._own_interrupts = interrupts is None
         self.interrupts = interrupts or Interrupts(log)
+        self.done = 0                              # steps ended so far
 
     def run(self) -> Outcome:
         """Run every step; never raises past the safe stop (the outcome says what happened)."""
-        done = 0
+        self.done = 0
         installed = self.interrupts.installed() if self._own_interrupts else nullcontext()
         with installed, self.interrupts.during("motion", on_stop=self._request_stop):
             if self.interrupts.count:
@@ -218,34 +219,41 @@ class RunEngine:
                 self._stop_pump()
                 return Outcome(ABORTED, "stopped by the operator before the first step", 0)
             try:
-                self.ctx.tare()
-                if self.ctx.live is not None:
-                    self.ctx.live.begin()
-                for planned in self.plan.steps:
-                    self._run_step(planned)
-                    done += 1
-                return Outcome(SUCCESS, steps_done=done)
-            except InterlockTripped as exc:
-                self.ctx.event("interlock", exc.name, {**exc.detail, "step": done})
-                self._make_safe(retract=True)
-                return Outcome(ABORTED, str(exc), done)
-            except RunAborted as exc:
-                self.ctx.event("abort", "operator", {"reason": str(exc), "step": done})
-                self._make_safe(retract=True)
-                reason = "stopped at once by a second Ctrl-C" if self.interrupts.motion_signals > 1 else str(exc)
-                return Outcome(ABORTED, reason, done)
-            except KeyboardInterrupt:
-                self.ctx.event("abort", "operator", {"reason": "second Ctrl-C: immediate stop", "step": done})
+                return self._run_plan()
+            except KeyboardInterrupt:      # the second Ctrl-C landed while the first was being handled
                 self._make_safe(retract=False)
-                return Outcome(ABORTED, "stopped at once by a second Ctrl-C", done)
-            except Exception as exc:  # a failing step must still leave the robot safe
-                message = f"{type(exc).__name__}: {exc}"
-                self.ctx.event("error", self.plan.steps[done].name if done < len(self.plan.steps) else "engine",
-                               {"error": message, "step": done})
-                self._make_safe(retract=self._arm_free())
-                return Outcome(FAILED, message, done)
-            finally:
-                self._stop_pump()
+                return Outcome(ABORTED, "stopped at once by a second Ctrl-C", self.done)
+
+    def _run_plan(self) -> Outcome:
+        try:
+            self.ctx.tare()
+            if self.ctx.live is not None:
+                self.ctx.live.begin()
+            for planned in self.plan.steps:
+                self._run_step(planned)
+                self.done += 1
+            return Outcome(SUCCESS, steps_done=self.done)
+        except InterlockTripped as exc:
+            self.ctx.event("interlock", exc.name, {**exc.detail, "step": self.done})
+            self._make_safe(retract=True)
+            return Outcome(ABORTED, str(exc), self.done)
+        except RunAborted as exc:
+            self.ctx.event("abort", "operator", {"reason": str(exc), "step": self.done})
+            self._make_safe(retract=True)
+            reason = "stopped at once by a second Ctrl-C" if self.interrupts.motion_signals > 1 else str(exc)
+            return Outcome(ABORTED, reason, self.done)
+        except KeyboardInterrupt:
+            self.ctx.event("abort", "operator", {"reason": "second Ctrl-C: immediate stop", "step": self.done})
+            self._make_safe(retract=False)
+            return Outcome(ABORTED, "stopped at once by a second Ctrl-C", self.done)
+        except Exception as exc:  # a failing step must still leave the robot safe
+            message = f"{type(exc).__name__}: {exc}"
+            step = self.plan.steps[self.done].name if self.done < len(self.plan.steps) else "engine"
+            self.ctx.event("error", step, {"error": message, "step": self.done})
+            self._make_safe(retract=self._arm_free())
+            return Outcome(FAILED, message, self.done)
+        finally:
+            self._stop_pump()
 
     def _request_stop(self) -> None:
         self.ctx.stop_requested = True
@@ -293,6 +301,9 @@ class RunEngine:
         arm = self.lab.arm
         try:
             arm.stop(self.ctx.limits.max_accel)
+        except KeyboardInterrupt:                 # the second Ctrl-C cut the command: once more, no retract
+            arm.stop(self.ctx.limits.max_accel)   # (a third signal is only noted)
+            retract = False
         except Exception as exc:                  # noqa: BLE001 - e.g. the link is gone
             self.log(f"warning: could not stop the arm: {exc}")
             retract = False
@@ -323,7 +334,12 @@ class RunEngine:
             self.ctx.clock.sleep(self.ctx.poll)
 
     def _stop_pump(self) -> None:
-        try:
-            self.lab.pump.stop()
-        except Exception as exc:
-            self.log(f"warning: could not stop the pump: {exc}")
+        for _ in range(2):                        # a Ctrl-C may cut the command: once more
+            try:
+                self.lab.pump.stop()
+                return
+            except KeyboardInterrupt:
+                continue
+            except Exception as exc:
+                self.log(f"warning: could not stop the pump: {exc}")
+                return

@@ -22,7 +22,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import OmegaConf
 
-from protocols.config_guard import run_app
+from protocols.app import run_app
 
 from .importer import ImportIncomplete, ImportSettings, import_source
 from .recording import ImportInputError

@@ -6,10 +6,13 @@ writing (connected fingers, the early window of a baseline estimate, the clock m
 second pass (:func:`.writer.write_store`) writes the frames as they come.
 
 Order of work, so that bad input never leaves anything behind: check the options, discover
-the files, check no target exists, scan every file, choose the fingers and the baseline,
-then write each run into a hidden staging directory beside its target (the rate check,
-which needs the exact median interval, is made on the stored times) and rename them all
-into place at the end. Any error before the renames removes every staging directory.
+the files (a directory's subfolders included), check no target exists, remove what a
+killed import left, scan every file, choose the fingers and the baseline (one pool for the
+whole import), then write each run into a hidden staging directory beside its target (the
+rate check, which needs the exact median interval, is made on the stored times) and rename
+them all into place at the end. A bad file of a directory is left out, and named once the
+others are in place (:class:`ImportIncomplete`); any other error before the renames removes
+every staging directory.
 """
 
 from __future__ import annotations
