@@ -6,9 +6,8 @@
 
 Exit status: 0 analysed, 2 bad input or config (nothing written), 1 analysis failed, 3
 interrupted (Ctrl-C or SIGTERM; nothing partial is left). Errors are one line; ``verbose=true``
-adds the traceback. Several runs (a directory, or ``-m``) also
-write ``analysis_summary.csv`` / ``.md`` (one row per run: the ``headline`` of its summary)
-in the current directory.
+adds the traceback. Several runs (a directory, or ``-m``) also write ``analysis_summary.csv``
+/ ``.md`` (one row per run: the ``headline`` of its summary) in the current directory.
 """
 
 from __future__ import annotations

@@ -202,8 +202,9 @@ def _values(ds, name: str, path: Path, dtype=float) -> np.ndarray:
     try:
         return np.asarray(ds[name].values, dtype)
     except Exception as exc:  # noqa: BLE001 - the codec's own error type varies
-        raise AnalysisInputError(f"{path}/biotac/{name}: a chunk cannot be read ({type(exc).__name__}: "
-                                 f"{str(exc).splitlines()[0][:120] if str(exc) else ''}); the store is damaged") from None
+        why = (str(exc).splitlines() or [""])[0][:120]
+        raise AnalysisInputError(f"{path}/biotac/{name}: a chunk cannot be read ({type(exc).__name__}: {why}); "
+                                 f"the store is damaged") from None
 
 
 def open_truth(path):

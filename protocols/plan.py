@@ -163,7 +163,8 @@ class PlanContext(Geometry):
                 raise ProtocolError(f"protocol.{name}", f"expected a finite number, got {brief(value)}")
         if not 0 < self.params.accel * 1e-3 <= self.limits.max_accel:
             raise ProtocolError("protocol.accel", f"expected an acceleration in (0, {self.limits.max_accel * 1e3:g}] "
-                                                  f"mm/s² (hardware.arm.max_accel_m_s2), got {brief(self.params.accel)}")
+                                                  f"mm/s² (hardware.arm.max_accel_m_s2), "
+                                                  f"got {brief(self.params.accel)}")
 
     def check_reachable(self, pose, key: str) -> None:
         if not np.all(np.isfinite(np.asarray(pose, float))):

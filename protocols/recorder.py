@@ -260,7 +260,8 @@ class Recorder:
         if errors:
             status = "failed"
             attrs["recorder_error"] = f"{type(errors[0]).__name__}: {errors[0]}"
-            attrs["error"] = "; ".join(filter(None, [f"recording failed: {attrs['recorder_error']}", attrs.get("error")]))
+            attrs["error"] = "; ".join(filter(None, [f"recording failed: {attrs['recorder_error']}",
+                                                     attrs.get("error")]))
         self.store.close(status, streams=summary, **attrs)
         self.stopped = True
         if errors:

@@ -74,7 +74,8 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
             store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
                                     run_id=prov["run_id"], provenance=provenance.summary(prov),
                                     attrs={"labels": plan.labels, "plan_duration_s": plan.duration},
-                                    live=(live_fingers(live, lab.biotac.fingers), model.config.views) if model else None)
+                                    live=(live_fingers(live, lab.biotac.fingers), model.config.views)
+                                    if model else None)
             recorder = Recorder(store, {"biotac": lab.biotac.read, "arm": lab.arm.read_states,
                                         "hand": lab.hand.read_states, "pump": lab.pump.read_states,
                                         "scale": lab.scale.read}, lab.clock)

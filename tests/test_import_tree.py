@@ -65,7 +65,8 @@ def test_a_tree_of_csv_folders_imports_in_one_call_and_analyses(rest, tmp_path):
         run_dir = out / Path(rel).with_suffix("")
         sub = Path(rel).parent.as_posix() if "/" in rel else ""
         tree = xr.open_datatree(run_dir / "run.zarr", engine="zarr")
-        assert tree.attrs["import"]["subfolder"] == sub and tree.attrs["import"]["source"] == str(tmp_path / "data" / rel)
+        assert tree.attrs["import"]["subfolder"] == sub
+        assert tree.attrs["import"]["source"] == str(tmp_path / "data" / rel)
         assert sorted(tree.attrs["baseline"]["details"]["files"]) == sorted(files)          # one pool for all
         assert tree.attrs["baseline"]["method"] == "estimated" and tree.attrs["import"]["rate_hz"] == pytest.approx(100)
         assert json.loads((run_dir / "run.json").read_text())["import"]["subfolder"] == sub

@@ -72,7 +72,8 @@ def test_the_time_limit_is_configurable_and_pours_are_bounded_too():
 
 @pytest.mark.parametrize("override, key", [
     ("hardware.step_s=1e-7", "hardware.step_s"), ("hardware.step_s=1", "hardware.step_s"),
-    ("hardware.biotac_rate_hz=1e308", "hardware.biotac_rate_hz"), ("hardware.hand_rate_hz=1e-300", "hardware.hand_rate_hz"),
+    ("hardware.biotac_rate_hz=1e308", "hardware.biotac_rate_hz"),
+    ("hardware.hand_rate_hz=1e-300", "hardware.hand_rate_hz"),
     ("hardware.pump.rate_hz=1e6", "hardware.pump.rate_hz"), ("hardware.scale.rate_hz=0.001", "hardware.scale.rate_hz"),
     ("hardware.buffer_s=1e9", "hardware.buffer_s"), ("hardware.seed=-5", "hardware.seed"),
     ("hardware.seed=100000000000000000000000000", "hardware.seed")])
@@ -82,8 +83,10 @@ def test_the_simulator_step_every_rate_and_the_seed_are_bounded(override, key):
 
 
 @pytest.mark.parametrize("override, key", [
-    ("hardware.biotac.rate_hz=1e308", "hardware.biotac.rate_hz"), ("hardware.pump.poll_hz=1e-9", "hardware.pump.poll_hz"),
-    ("++hardware.scale.buffer_s=1e12", "hardware.scale.buffer_s"), ("++hardware.hand.rate_hz=inf", "hardware.hand.rate_hz")])
+    ("hardware.biotac.rate_hz=1e308", "hardware.biotac.rate_hz"),
+    ("hardware.pump.poll_hz=1e-9", "hardware.pump.poll_hz"),
+    ("++hardware.scale.buffer_s=1e12", "hardware.scale.buffer_s"),
+    ("++hardware.hand.rate_hz=inf", "hardware.hand.rate_hz")])
 def test_the_real_drivers_bound_their_rates_too(override, key):
     assert refused("hardware=lab", override, error=ConfigError, check=check_hardware).startswith(key + ":")
 
