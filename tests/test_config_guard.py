@@ -10,7 +10,6 @@ import pytest
 
 from protocols.config_guard import ConfigFileError, check_overrides, check_text
 
-pytestmark = pytest.mark.slow
 PY = [sys.executable, "-c", "from protocols.cli import main; main()"]
 CLI = [*PY, "analyze=false", "progress=false"]
 HEAD = "# @package _global_\nprotocol:\n  name: shared\n  steps:\n    - wait: {duration: 0.1}\n"
@@ -34,6 +33,7 @@ def assert_refused(proc, *words):
         assert w in lines[0], lines[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("plan_only", ["true", "false"])
 def test_a_protocol_setting_hydra_callbacks_is_refused_before_hydra_builds_them(tmp_path, plan_only):
     victim = tmp_path / "victim.txt"
@@ -45,6 +45,7 @@ def test_a_protocol_setting_hydra_callbacks_is_refused_before_hydra_builds_them(
     assert not list(tmp_path.rglob("run.zarr"))
 
 
+@pytest.mark.slow
 def test_a_protocol_cannot_point_a_log_handler_at_another_file(tmp_path):
     victim = tmp_path / "victim.txt"
     victim.write_text("precious")
@@ -54,6 +55,7 @@ def test_a_protocol_cannot_point_a_log_handler_at_another_file(tmp_path):
     assert victim.read_text() == "precious"
 
 
+@pytest.mark.slow
 def test_a_protocol_cannot_select_hydra_groups_or_move_configs_there(tmp_path):
     proc = run_with(tmp_path, "defs", "# @package _global_\ndefaults:\n  - override /hydra/job_logging: stdout\n"
                     + HEAD.split("\n", 1)[1], "plan_only=true")
@@ -62,6 +64,7 @@ def test_a_protocol_cannot_select_hydra_groups_or_move_configs_there(tmp_path):
     assert_refused(proc, "pkg.yaml", "hydra.callbacks.x._target_")
 
 
+@pytest.mark.slow
 def test_experiments_sweep_run_keys_but_not_hydra_settings(tmp_path):
     ok = subprocess.run([*PY, "-m", "+experiment=speeds_by_surface", "plan_only=true"], cwd=tmp_path,
                         capture_output=True, text=True, timeout=120)
@@ -72,6 +75,7 @@ def test_experiments_sweep_run_keys_but_not_hydra_settings(tmp_path):
     assert_refused(proc, "sneaky.yaml", "hydra.sweeper.params.hydra.job_logging.root.level")
 
 
+@pytest.mark.slow
 def test_a_yaml_alias_bomb_is_refused_at_once(tmp_path):
     lines = ["# @package _global_", "a0: &a0 [x, x, x]"]
     lines += [f"a{i}: &a{i} [*a{i - 1}, *a{i - 1}, *a{i - 1}]" for i in range(1, 27)]
@@ -83,6 +87,7 @@ def test_a_yaml_alias_bomb_is_refused_at_once(tmp_path):
     assert_refused(proc, "bomb.yaml", "aliases", "100000")
 
 
+@pytest.mark.slow
 def test_a_200_deep_repeat_is_one_line_naming_the_file_or_the_key(tmp_path):
     inner = "[{wait: {duration: 0.1}}]"
     for _ in range(200):

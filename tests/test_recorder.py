@@ -288,6 +288,7 @@ class JitteryBridge:
         return frames
 
 
+@pytest.mark.slow
 def test_time_axes_increase_strictly_while_recording_and_after(tmp_path):
     """Issue 13 item 12, the recorder's part: committed times (what a reader, or a killed
     run, keeps) never go back across a flush when the clock model refits, nor at a frame

@@ -17,7 +17,6 @@ from protocols import rundir
 from protocols.interrupts import Interrupts
 from protocols.recover import main as recover_main
 
-pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[1]
 RUN = [sys.executable, "-c", "from protocols.cli import main; main()", "progress=false"]
 QUIET = ["analyze=false", "progress=false"]
@@ -45,6 +44,7 @@ def store_opens_closed(store: Path, status: str):
 
 
 # ----------------------------------------------------------------------------- item 7: SIGKILL
+@pytest.mark.slow
 def test_a_killed_fast_simulated_run_keeps_all_but_its_last_second_of_its_own_time():
     """Default runs (simulated lab, several times faster than real time) killed at three
     points: the store keeps everything but the last second of the run's time."""
@@ -58,6 +58,7 @@ def test_a_killed_fast_simulated_run_keeps_all_but_its_last_second_of_its_own_ti
 
 
 # ----------------------------------------------------------------------------- item 8: signals
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signals_every_50_ms_from_recording_to_exit_leave_a_closed_store(tmp_path, sig):
     """Ctrl-C (or SIGTERM) every 50 ms from the moment the store exists until the process
@@ -76,6 +77,7 @@ def test_signals_every_50_ms_from_recording_to_exit_leave_a_closed_store(tmp_pat
     assert truth.attrs["long_name"] == "simulator ground truth" and len(truth.children) > 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_signals_from_the_start_of_the_job_never_leave_a_half_made_store(tmp_path, sig):
     """Signals every 20 ms from the moment the job starts (its run directory is locked;
@@ -116,6 +118,7 @@ def test_a_signal_before_the_first_step_ends_the_run_aborted_without_motion():
         interrupts.handle(signal.SIGTERM)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_during_the_analysis_drops_the_analysis_and_keeps_the_run(tmp_path, sig):
     proc = start(tmp_path)
@@ -138,6 +141,7 @@ def recorded(tmp_path_factory):
     return root / "run" / "run.zarr"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_tactile_analyze_interrupted_says_so_and_leaves_nothing_partial(recorded, sig):
     proc = subprocess.Popen([sys.executable, "-c", "from analysis.cli import main; main()", f"run={recorded}"],
@@ -152,6 +156,7 @@ def test_tactile_analyze_interrupted_says_so_and_leaves_nothing_partial(recorded
 
 
 # ----------------------------------------------------------------------------- item 11: arm link lost
+@pytest.mark.slow
 def test_a_lost_arm_link_fails_the_run_with_its_cause_after_the_safe_stop(tmp_path):
     proc = subprocess.run([*RUN, *QUIET, "hydra.run.dir=run", "+hardware.faults.disconnect={arm: 6.0}"],
                           cwd=tmp_path, capture_output=True, text=True, timeout=240)
@@ -164,6 +169,7 @@ def test_a_lost_arm_link_fails_the_run_with_its_cause_after_the_safe_stop(tmp_pa
 
 
 # ----------------------------------------------------------------------------- item 13: one writer
+@pytest.mark.slow
 def test_recover_refuses_a_run_that_is_still_recording(tmp_path):
     proc = start(tmp_path, *QUIET, "hardware.realtime=true")
     store = tmp_path / "run" / "run.zarr"
@@ -179,6 +185,7 @@ def test_recover_refuses_a_run_that_is_still_recording(tmp_path):
     store_opens_closed(store, "aborted")
 
 
+@pytest.mark.slow
 def test_a_second_tactile_run_on_the_same_directory_is_refused_and_leaves_the_first_alone(tmp_path):
     first = start(tmp_path, *QUIET, "hardware.realtime=true", "protocol.sweep_speed=10")
     wait_for(lambda: (tmp_path / "run" / ".hydra" / "config.yaml").exists() or first.poll() is not None)
@@ -205,6 +212,7 @@ def small_disk(tmp_path):
     subprocess.run(["umount", "-l", str(mount)], capture_output=True)
 
 
+@pytest.mark.slow
 def test_an_analysis_that_fails_inside_tactile_run_fails_the_job_and_says_what_succeeded(tmp_path, small_disk):
     """The 2.9 MB disk holds the recording (2.45 MB) but not its analysis."""
     proc = subprocess.run([*RUN, f"hydra.run.dir={small_disk}/run"], cwd=tmp_path, capture_output=True, text=True,
