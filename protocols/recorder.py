@@ -13,9 +13,12 @@ One acquisition thread per stream polls its device's non-blocking drain method e
 and queues the samples; a device error becomes a ``fault`` event and marks the stream
 stale, and the thread keeps retrying. A writer thread converts the queued samples to
 arrays, stamps them with the stream's clock model (:mod:`protocols.clockmodel`), appends
-them and commits the store every ``flush_interval_s`` of wall time or of the run's own
-clock time, whichever comes first, so a crash loses about that much of either (a
-simulated run faster than real time included). :meth:`Recorder.stop` drains every stream, flushes, refits each clock
+them and commits the store every ``flush_interval_s`` of wall time or :data:`RUN_FLUSH_S` of
+the run's own clock time, whichever comes first; a simulated clock faster than real time is
+held back while the last commit is :data:`MAX_BEHIND_S` behind (:meth:`Recorder.keep_up`),
+so a crash loses less than a second of either. (Each commit rewrites the last partial chunk
+of every array: commits every 0.75 s of run time cost a simulated run at 4× real time about
+a third of its speed; every 0.5 s, half.) :meth:`Recorder.stop` drains every stream, flushes, refits each clock
 model on the whole run, rewrites the time coordinates and closes the store.
 
 Times in the store are seconds since run start: ``t0 = clock.now()`` at :meth:`start`,
@@ -43,7 +46,8 @@ log = logging.getLogger(__name__)
 
 STREAMS = ("biotac", "arm", "hand", "pump", "scale")
 WAKE_S = 0.02                 # wall s between the writer's looks at the clocks
-MAX_BEHIND_S = 0.8            # run s a free-running (simulated) clock may run ahead of the last commit
+RUN_FLUSH_S = 0.75            # run s between commits of a clock faster than the wall (a simulated lab)
+MAX_BEHIND_S = 0.95           # run s a free-running (simulated) clock may run ahead of the last commit
 _I16 = np.iinfo(np.int16)
 
 
@@ -155,8 +159,8 @@ class Recorder:
         sources: stream name (``biotac``, ``arm``, ``hand``, ``pump``, ``scale``) → the device's
             non-blocking drain method (``lab.biotac.read``, ``lab.arm.read_states``, ...).
         clock: the devices' :class:`~hardware.device.Clock` (``now()``, ``sleep()``).
-        flush_interval_s: seconds between commits, of wall time or of clock time, whichever
-            comes first (about the most a crash loses).
+        flush_interval_s: wall-clock seconds between commits (with :data:`RUN_FLUSH_S` of
+            clock time, whichever comes first: about the most a crash loses).
         poll_interval_s: clock seconds between polls of a source.
         retry_interval_s: clock seconds between retries of a failing source.
         min_latency_s: known minimum transport latency per stream (s) subtracted by the
@@ -392,17 +396,17 @@ class Recorder:
 
     # ------------------------------------------------------------------ writing
     def _write_loop(self) -> None:
-        # A commit is due flush_interval_s after the previous one started in wall time *or* in
-        # the run's own (clock) time, whichever comes first: a simulated run several times
-        # faster than real time would otherwise lose seconds of its own time to a crash.
+        # A commit is due flush_interval_s of wall time or RUN_FLUSH_S of the run's own (clock)
+        # time after the previous one started, whichever comes first: a simulated run several
+        # times faster than real time would otherwise lose seconds of its own time to a crash.
         # Deadlines run from the previous flush's start, so a slow flush does not add to them.
         wall_due = time.monotonic() + self.flush_interval_s
-        run_due = float(self.clock.now()) + self.flush_interval_s
+        run_due = float(self.clock.now()) + RUN_FLUSH_S
         while not self._writer_stop.wait(min(self.flush_interval_s, WAKE_S)):
             if time.monotonic() < wall_due and float(self.clock.now()) < run_due:
                 continue
             wall_due = time.monotonic() + self.flush_interval_s
-            run_due = float(self.clock.now()) + self.flush_interval_s
+            run_due = float(self.clock.now()) + RUN_FLUSH_S
             try:
                 self._flush()
             except Exception as e:               # noqa: BLE001 - keep the samples, retry next time
@@ -433,6 +437,7 @@ class Recorder:
             self.store.commit()
             self.commit_wall_times.append(time.monotonic())
             self.flush_durations.append(time.monotonic() - w0)
+            self.writer_error = None                       # recording is healthy again
             with self._committed:
                 self._committed_clock = c0                 # every sample received before c0 is in
                 self._committed.notify_all()
