@@ -87,8 +87,8 @@ class Interrupts:
             if self.motion_signals == 1:
                 if self._on_stop is not None:
                     self._on_stop()
-                self.log(f"\n{name}: stopping safely: finishing the current motion, retracting "
-                         f"(Ctrl-C again to stop at once)")
+                self._say(f"\n{name}: stopping safely: finishing the current motion, retracting "
+                          f"(Ctrl-C again to stop at once)")
                 return
             if self.motion_signals == 2:
                 raise KeyboardInterrupt
@@ -96,4 +96,10 @@ class Interrupts:
         if self.phase in RAISING:
             raise KeyboardInterrupt
         if self.count == 1:
-            self.log(f"\n{name}: stopping once the files being written are complete")
+            self._say(f"\n{name}: stopping once the files being written are complete")
+
+    def _say(self, message: str) -> None:
+        try:
+            self.log(message)
+        except RuntimeError:             # the signal cut a print to the same stream: say nothing
+            pass
