@@ -4,10 +4,10 @@
     tactile-analyze run=outputs/2026-01-01 analysis.flow.method=dis    # every run.zarr below
     tactile-analyze -m run=A/run.zarr,B/run.zarr                        # a list of runs
 
-Exit status: 0 analysed, 2 bad input or config (nothing written), 1 analysis failed. Errors
-are one line; ``verbose=true`` adds the traceback. Several runs (a directory, or ``-m``) also
-write ``analysis_summary.csv`` / ``.md`` (one row per run: the ``headline`` of its summary)
-in the current directory.
+Exit status: 0 analysed, 2 bad input or config (nothing written), 1 analysis failed, 3
+interrupted (Ctrl-C or SIGTERM; nothing partial is left). Errors are one line; ``verbose=true``
+adds the traceback. Several runs (a directory, or ``-m``) also write ``analysis_summary.csv``
+/ ``.md`` (one row per run: the ``headline`` of its summary) in the current directory.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from .config import AnalysisConfigError
 from .load import AnalysisInputError
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
-BAD_INPUT, FAILED = 2, 1
+BAD_INPUT, FAILED, INTERRUPTED = 2, 1, 3
 _state = {"code": 0, "rows": []}
 
 
@@ -59,6 +59,12 @@ def analyse_paths(run: str, analysis_cfg, verbose: bool = False, console=print) 
             _report(exc, f"analysis of {store} failed", verbose)
             row["result"] = f"failed: {type(exc).__name__}: {exc}"
             code = max(code, FAILED)
+        except KeyboardInterrupt:  # Ctrl-C or SIGTERM: stop here; the analysis leaves no partial files
+            print(f"analysis of {store} interrupted; analyse it again with tactile-analyze run={store}",
+                  file=sys.stderr)
+            row["result"] = "interrupted"
+            _state["rows"].append(row)
+            return INTERRUPTED
         _state["rows"].append(row)
     if len(stores) > 1:
         write_table(Path.cwd(), _state["rows"][-len(stores):])
@@ -107,10 +113,8 @@ def _app(cfg) -> None:
 
 
 def main() -> None:
-    try:
-        _app()
-    except SystemExit:
-        raise
+    from protocols.app import run_app
+    run_app(_app)                   # a config file is data: one line for a bad one, exit 2
     sys.exit(_state["code"])
 
 

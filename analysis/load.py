@@ -197,13 +197,13 @@ def load_run(path) -> RunData:
     b = dt["biotac"].to_dataset()
     if "electrodes" not in b or "time" not in b.coords:
         raise AnalysisInputError(f"{path}: biotac group without electrodes/time; nothing to analyse")
-    time = np.asarray(b["time"].values, float)
-    electrodes = np.asarray(b["electrodes"].values, float)
+    time = _values(b, "time", path)
+    electrodes = _values(b, "electrodes", path)
     fingers = [str(f) for f in b["finger"].values]
-    pdc = np.asarray(b["pdc"].values, float) if "pdc" in b else None
-    baseline_counts = np.asarray(b["baseline"].values, float) if "baseline" in b else None
-    baseline_unc = np.asarray(b["baseline_uncertainty"].values, float) if "baseline_uncertainty" in b else None
-    stored_valid = np.asarray(b["valid"].values, bool) if "valid" in b else np.ones(len(time), bool)
+    pdc = _values(b, "pdc", path) if "pdc" in b else None
+    baseline_counts = _values(b, "baseline", path) if "baseline" in b else None
+    baseline_unc = _values(b, "baseline_uncertainty", path) if "baseline_uncertainty" in b else None
+    stored_valid = _values(b, "valid", path, bool) if "valid" in b else np.ones(len(time), bool)
     time, electrodes, pdc, valid, dropped = screen_frames(path, time, electrodes, pdc, stored_valid)
     missing = {}
     arm_time = tcp_pose = tcp_speed = None
@@ -230,6 +230,10 @@ def load_run(path) -> RunData:
         events = Events(np.zeros(0), [], [], [])
         missing["events"] = "no events: no tare stretch (baseline fallback used), no step boundaries"
     attrs = dict(dt.attrs)
+    labels = attrs.get("labels")
+    if labels is not None and not (isinstance(labels, list) and all(isinstance(x, str) for x in labels)):
+        raise AnalysisInputError(f"{path}: root attribute labels: expected a list of segment label names, got "
+                                 f"{str(labels)[:60]!r}; the store's attributes are damaged")
     prov = attrs.get("provenance") or {}
     if isinstance(prov, str):
         try:
@@ -246,6 +250,17 @@ def load_run(path) -> RunData:
                    tcp_pose=tcp_pose, tcp_speed=tcp_speed, events=events, attrs=attrs, config=config,
                    missing=missing, input_sha256=h.hexdigest(), dropped=dropped, valid=valid,
                    baseline_counts=baseline_counts, baseline_uncertainty=baseline_unc)
+
+
+def _values(ds, name: str, path: Path, dtype=float) -> np.ndarray:
+    """``ds[name]`` as an array; a chunk that cannot be read (corrupt, truncated) is an
+    :class:`AnalysisInputError` naming the array."""
+    try:
+        return np.asarray(ds[name].values, dtype)
+    except Exception as exc:  # noqa: BLE001 - the codec's own error type varies
+        why = (str(exc).splitlines() or [""])[0][:120]
+        raise AnalysisInputError(f"{path}/biotac/{name}: a chunk cannot be read ({type(exc).__name__}: {why}); "
+                                 f"the store is damaged") from None
 
 
 def open_truth(path):

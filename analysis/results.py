@@ -222,10 +222,13 @@ OUTPUTS = ("analysis.zarr", "summary.json", "score.json", "figures")
 def swap_in(staging: Path, run_dir: Path, history_record: dict | None) -> None:
     """Replace the run directory's analysis outputs by those in ``staging``.
 
-    Each output is renamed into place (an atomic rename per output; the previous one is first
-    moved aside and deleted after). ``summary.json`` goes last: it is the commit mark, and
-    every output carries the same ``analysis_id``. ``history_record`` (the previous analysis's
-    config and provenance) is appended to ``analysis_history.jsonl``.
+    ``summary.json`` is the commit mark: the previous one is moved aside first and the new
+    one renamed into place last, so a run directory holds a ``summary.json`` only beside the
+    outputs of that same analysis (every output carries its ``analysis_id``); a kill in
+    between leaves outputs without a mark, an analysis that ``protocols.resume.analysis_state``
+    calls incomplete. Each output is renamed into place (atomic per output; the previous one
+    is moved aside and deleted after). ``history_record`` (the previous analysis's config and
+    provenance) is appended to ``analysis_history.jsonl``.
     """
     trash = run_dir / f".analysis-old-{uuid.uuid4().hex[:8]}"
     trash.mkdir()
@@ -233,8 +236,9 @@ def swap_in(staging: Path, run_dir: Path, history_record: dict | None) -> None:
         if history_record is not None:
             with open(run_dir / "analysis_history.jsonl", "a") as f:
                 f.write(json.dumps(_clean(history_record), sort_keys=True) + "\n")
-        order = [o for o in OUTPUTS if o != "summary.json"] + ["summary.json"]
-        for name in order:
+        if (run_dir / "summary.json").exists():
+            os.replace(run_dir / "summary.json", trash / "summary.json")
+        for name in [o for o in OUTPUTS if o != "summary.json"] + ["summary.json"]:
             new, old = staging / name, run_dir / name
             if old.exists():
                 os.replace(old, trash / name)
@@ -243,3 +247,12 @@ def swap_in(staging: Path, run_dir: Path, history_record: dict | None) -> None:
     finally:
         shutil.rmtree(trash, ignore_errors=True)
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def remove_debris(run_dir: Path) -> list[str]:
+    """Remove what killed analyses left in ``run_dir`` (``.analysis-staging-*``,
+    ``.analysis-old-*``); returns their names. Call with the run directory locked."""
+    found = sorted(p for pattern in (".analysis-staging-*", ".analysis-old-*") for p in run_dir.glob(pattern))
+    for p in found:
+        shutil.rmtree(p, ignore_errors=True)
+    return [p.name for p in found]

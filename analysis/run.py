@@ -6,7 +6,9 @@ when a run ends and what ``tactile-analyze`` calls per run. Outputs in the run d
 i.e. stores with a ``truth`` group), ``figures/*.png``, and ``analysis_history.jsonl`` (one line
 per replaced analysis: its config, provenance and headline). Everything is written into a
 staging directory first and then renamed into place (:func:`analysis.results.swap_in`), so a
-failure leaves the previous results untouched and never partial files.
+failure leaves the previous results untouched and never partial files. The run directory is
+locked while it is analysed (``protocols.rundir``: not while the run records, not twice at
+once), and what a killed analysis left behind is removed first.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
+
+from protocols import rundir
 
 from . import figures as figs
 from . import results
@@ -118,6 +122,16 @@ def analyze_run(store_path, analysis_cfg=None, *, console=print) -> dict:
     if not cfg.enabled:
         console(f"analysis: disabled (analysis.enabled=false); {store_path} not analysed")
         return {"headline": {"status": "disabled"}}
+    if not (store_path / "zarr.json").is_file():
+        return _analyse_and_write(store_path, cfg, console)     # load_run says what is wrong; nothing to lock
+    with rundir.locked(store_path.parent):
+        removed = results.remove_debris(store_path.parent)
+        if removed:
+            console(f"analysis: removed what a killed analysis left in {store_path.parent}: {', '.join(removed)}")
+        return _analyse_and_write(store_path, cfg, console)
+
+
+def _analyse_and_write(store_path: Path, cfg, console) -> dict:
     run = load_run(store_path)
     model = get_model(cfg.tactile)
     a = analyse(run, cfg, model)

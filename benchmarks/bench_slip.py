@@ -25,7 +25,7 @@ same conditions (``pour_plain``), for contrast: its bottle falls (``full_slip`` 
 its onset is the natural one of an early-fire run.
 
 ``rest_bag`` — **false alarms on a real recording**: the untouched BioTac SPs of
-``/work/shared/data/biotac_rest_untouched.bag`` (ff, mf, th; 9.76 s), rest impedance from
+``tests/data/biotac_rest_untouched.bag`` (ff, mf, th; 9.76 s), rest impedance from
 its first second, replayed through :func:`protocols.live.replay` (online flow + detector,
 robot still). The fingers touch nothing, so the detector is never armed (it needs settled
 contact) and cannot fire: ``margins`` say how close each criterion came, *as if* armed.
@@ -92,7 +92,7 @@ from tactile.slip import CAUSES, SlipConfig, SlipDetector  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF_DIR = ROOT / "conf"
-BAG = Path("/work/shared/data/biotac_rest_untouched.bag")
+BAG = ROOT / "tests" / "data" / "biotac_rest_untouched.bag"
 QUIET = ("progress=false", "analyze=false")
 EPISODE_GAP_S = 0.5
 TARGET_MS = 50.0

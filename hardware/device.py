@@ -13,6 +13,8 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
+import numpy as np
+
 from .errors import NotConnectedError
 
 
@@ -57,6 +59,28 @@ class WallClock:
     def sleep(self, dt: float) -> None:
         if dt > 0:
             time.sleep(dt)
+
+
+def batch_times(ends, counts, period: float, previous: float | None = None) -> np.ndarray:
+    """Times (s) of samples that arrive in batches: the ``counts[k]`` samples of batch k end
+    at ``ends[k]`` (its timestamp), ``period`` s apart — closer when that would reach back
+    to the end of the batch before it (``previous`` for the first batch: the last sample
+    before these; ``None``: no bound), so the times increase strictly whenever the ends do.
+
+    Batches are a BioTac frame's PAC samples (22 at 2.2 kHz per 100 Hz frame, but frame
+    stamps jitter: one frame's 10 ms of samples can be longer than the time since the frame
+    before) or serial lines read together. ``ends``, ``counts``: (N,); returns (sum(counts),).
+    """
+    ends = np.asarray(ends, float)
+    counts = np.asarray(counts, np.int64)
+    before = np.r_[np.nan if previous is None else float(previous), ends[:-1]]
+    with np.errstate(invalid="ignore"):
+        room = (ends - before) / np.maximum(counts, 1)
+        spacing = np.where(np.isfinite(room), np.minimum(period, room), period)
+    total = int(counts.sum())
+    first = np.repeat(np.cumsum(counts) - counts, counts)
+    back = np.repeat(counts, counts) - 1 - (np.arange(total) - first)        # samples after this one
+    return np.repeat(ends, counts) - back * np.repeat(spacing, counts)
 
 
 class Device(ABC):

@@ -15,6 +15,14 @@ what, so a run engine can decide between retrying, recovering and aborting:
 
 from __future__ import annotations
 
+import math
+
+#: the range of every configured sample or poll rate (Hz): far beyond any device of the lab
+#: on both sides, short of a rate that makes a run crawl or a buffer unbounded
+RATE_RANGE_HZ = (0.1, 10_000.0)
+#: the range of every buffer length (s of data a device keeps unread)
+BUFFER_RANGE_S = (0.1, 3600.0)
+
 
 class DeviceError(Exception):
     """Base class of every device error."""
@@ -60,11 +68,33 @@ class ConfigError(ValueError):
         super().__init__(f"{key}: {message}")
 
 
+def brief(value, limit: int = 60) -> str:
+    """``value`` for a message: a number in at most 6 significant digits when written out it
+    is long (a 300-digit number is not a message), anything else cut to ``limit`` characters."""
+    if type(value).__module__ == "numpy" and hasattr(value, "item"):
+        value = value.item()
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 50:
+        return f"{float(value):.6g}" if value.bit_length() <= 1000 else f"a {value.bit_length()}-bit whole number"
+    text = repr(value)
+    if isinstance(value, float) and len(text) > 16:
+        return f"{value:.6g}"
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
 def require_positive(cfg, names, key: str) -> None:
     """Raise :class:`ConfigError` naming ``<key>.<name>`` unless each attribute ``names`` of
     the config dataclass ``cfg`` is a finite number > 0."""
-    import math
     for name in names:
         value = getattr(cfg, name)
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-            raise ConfigError(f"{key}.{name}", f"expected a number > 0, got {value!r}")
+            raise ConfigError(f"{key}.{name}", f"expected a number > 0, got {brief(value)}")
+
+
+def require_within(cfg, names, bounds: tuple[float, float], units: str, key: str) -> None:
+    """Raise :class:`ConfigError` naming ``<key>.<name>`` unless each attribute ``names`` of
+    ``cfg`` is a number within ``bounds`` (inclusive), in ``units``."""
+    lo, hi = bounds
+    for name in names:
+        value = getattr(cfg, name)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+            raise ConfigError(f"{key}.{name}", f"expected a number of {units} in [{lo:g}, {hi:g}], got {brief(value)}")

@@ -25,9 +25,8 @@ import numpy as np
 
 from .biotac import FINGERS, N_TAXELS, BiotacFrame, TactileSensors, check_fingers
 from .device import Clock, DeviceIdentity, WallClock
-from .errors import (ConfigError, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
-                     NotConnectedError,
-                     require_positive)
+from .errors import (BUFFER_RANGE_S, RATE_RANGE_HZ, ConfigError, DeviceDisconnectedError, DeviceFaultError,
+                     DeviceTimeoutError, NotConnectedError, require_positive, require_within)
 
 SYNC = b"\xA5\x5A"
 VERSION = 1
@@ -199,6 +198,8 @@ class SerialBiotacConfig:
     def __post_init__(self):
         self.fingers = check_fingers(self.fingers, f"{self.key}.fingers")
         require_positive(self, ("rate_hz", "buffer_s", "first_frame_timeout_s", "stale_timeout_s"), self.key)
+        require_within(self, ("rate_hz",), RATE_RANGE_HZ, "Hz", self.key)
+        require_within(self, ("buffer_s",), BUFFER_RANGE_S, "s", self.key)
         if not isinstance(self.port, str) or not self.port:
             raise ConfigError(f"{self.key}.port", f"expected a pyserial port or URL, got {self.port!r}")
 

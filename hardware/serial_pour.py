@@ -22,9 +22,9 @@ import threading
 from collections import deque
 from dataclasses import dataclass, field
 
-from .device import Clock, DeviceIdentity, WallClock
-from .errors import (DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError, NotConnectedError,
-                     require_positive)
+from .device import Clock, DeviceIdentity, WallClock, batch_times
+from .errors import (BUFFER_RANGE_S, RATE_RANGE_HZ, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
+                     NotConnectedError, require_positive, require_within)
 from .pour import Pump, PumpState, Scale, ScaleReading
 from .serial_biotac import open_serial
 
@@ -32,12 +32,17 @@ from .serial_biotac import open_serial
 class LinePort:
     """A serial port read line by line on a thread; lines go to ``on_line(text, host_time)``.
 
+    Lines read together get receipt times spread back from the read, ``line_period_s``
+    apart (the device's line rate) but never back to the line before: strictly increasing.
+
     ``lost`` holds the reason once the port fails (the device vanished, the pty closed).
     """
 
     def __init__(self, port: str, baudrate: int, who: str, key: str, on_line, clock: Clock,
-                 eol: bytes = b"\r"):
+                 eol: bytes = b"\r", line_period_s: float = 0.0):
         self.port, self.who, self.on_line, self.clock, self.eol = port, who, on_line, clock, eol
+        self.line_period_s = line_period_s
+        self._last_time: float | None = None
         self.serial = open_serial(port, baudrate, who, key)
         self.serial.reset_input_buffer()
         self.lost: str | None = None
@@ -79,10 +84,15 @@ class LinePort:
             pending += data.replace(b"\n", b"\r")
             *lines, rest = pending.split(b"\r")
             pending = bytearray(rest)
-            now = self.clock.now()
-            for raw in lines:
-                if raw:
-                    self.on_line(raw.decode("ascii", "replace").strip(), now)
+            lines = [raw for raw in lines if raw]
+            if not lines:
+                continue
+            # lines read together arrived over the time since the previous ones: spread them
+            # back from now, so no two get the same receipt time
+            times = batch_times([self.clock.now()], [len(lines)], self.line_period_s, self._last_time)
+            self._last_time = float(times[-1])
+            for raw, t in zip(lines, times):
+                self.on_line(raw.decode("ascii", "replace").strip(), float(t))
 
 
 # ============================================================================ pump
@@ -108,6 +118,8 @@ class SerialPumpConfig:
 
     def __post_init__(self):
         require_positive(self, ("max_rate_ml_min", "poll_hz", "timeout_s", "buffer_s"), self.key)
+        require_within(self, ("poll_hz",), RATE_RANGE_HZ, "Hz", self.key)
+        require_within(self, ("buffer_s",), BUFFER_RANGE_S, "s", self.key)
 
 
 class SerialPump(Pump):
@@ -287,6 +299,8 @@ class SerialScaleConfig:
 
     def __post_init__(self):
         require_positive(self, ("rate_hz", "first_reading_timeout_s", "stale_timeout_s", "timeout_s", "buffer_s"), self.key)
+        require_within(self, ("rate_hz",), RATE_RANGE_HZ, "Hz", self.key)
+        require_within(self, ("buffer_s",), BUFFER_RANGE_S, "s", self.key)
 
 
 class SerialScale(Scale):
@@ -319,7 +333,7 @@ class SerialScale(Scale):
             return
         self._first.clear()
         self._port = LinePort(self.cfg.port, self.cfg.baudrate, self.kind, f"{self.cfg.key}.port",
-                              self._on_line, self.clock, eol=b"\r\n")
+                              self._on_line, self.clock, eol=b"\r\n", line_period_s=1.0 / self.cfg.rate_hz)
         if not self._first.wait(self.cfg.first_reading_timeout_s):
             lost = self._port.lost
             self.close()

@@ -26,9 +26,8 @@ import numpy as np
 
 from .biotac import FINGERS, N_TAXELS, BiotacFrame, TactileSensors, check_fingers
 from .device import Clock, DeviceIdentity, WallClock
-from .errors import (ConfigError, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
-                     NotConnectedError, SafetyError,
-                     require_positive)
+from .errors import (BUFFER_RANGE_S, RATE_RANGE_HZ, ConfigError, DeviceDisconnectedError, DeviceFaultError,
+                     DeviceTimeoutError, NotConnectedError, SafetyError, require_positive, require_within)
 from .hand import JOINT_INDEX, JOINT_NAMES, Hand, HandState, check_joint_names
 from .rosbridge import RosbridgeConfig, RosbridgeConnection
 
@@ -145,6 +144,8 @@ class ShadowHandConfig:
             raise ConfigError(f"{self.key}.controller_joints", str(exc)) from None
         require_positive(self, ("max_velocity_rad_s", "first_state_timeout_s", "arrival_tolerance_rad",
                      "arrival_timeout_s", "rate_hz", "buffer_s"), self.key)
+        require_within(self, ("rate_hz",), RATE_RANGE_HZ, "Hz", self.key)
+        require_within(self, ("buffer_s",), BUFFER_RANGE_S, "s", self.key)
 
 
 class ShadowHand(_RosbridgeDevice, Hand):
@@ -281,6 +282,8 @@ class RosbridgeBiotacConfig:
     def __post_init__(self):
         self.fingers = check_fingers(self.fingers, f"{self.key}.fingers")
         require_positive(self, ("rate_hz", "buffer_s", "first_frame_timeout_s"), self.key)
+        require_within(self, ("rate_hz",), RATE_RANGE_HZ, "Hz", self.key)
+        require_within(self, ("buffer_s",), BUFFER_RANGE_S, "s", self.key)
 
 
 class RosbridgeBiotacs(_RosbridgeDevice, TactileSensors):

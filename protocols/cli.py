@@ -14,7 +14,6 @@ from __future__ import annotations
 import csv
 import json
 import logging
-import os
 import sys
 import traceback
 from pathlib import Path
@@ -24,8 +23,10 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
-from . import resume
-from .run import hand_off, run_protocol
+from . import resume, rundir
+from .app import run_app
+from .interrupts import Interrupts
+from .run import RunResult, hand_off, run_protocol
 from .schema import check_targets, register
 
 log = logging.getLogger("tactile-run")
@@ -41,18 +42,53 @@ def console(message: str) -> None:
     log.info(message)
 
 
-def run_job(cfg, console=console) -> int:
-    """Run one Hydra job; never raises. Returns the exit code."""
+_interrupts = Interrupts(console)
+
+
+def run_job(cfg, console=console, interrupts: Interrupts | None = None) -> int:
+    """Run one Hydra job; never raises. Returns the exit code.
+
+    The process's :class:`~protocols.interrupts.Interrupts` (installed by :func:`main`) owns
+    Ctrl-C and SIGTERM: before anything is written a signal ends the job there; once the
+    store exists the run stops safely and closes; during the analysis, the analysis is
+    dropped (the recording is complete). After an operator stop, the sweep's remaining jobs
+    are skipped. Between and after jobs signals are noted only (files may be being written)."""
+    interrupts = interrupts or _interrupts
     hc = HydraConfig.get()
     run_dir = Path(hc.runtime.output_dir)
+    if interrupts.count:
+        console(f"run {run_dir}: skipped (the sweep was stopped by the operator)")
+        return EXIT_CODES["aborted"]
+    interrupts.phase = "setup"
+    try:
+        return _job(cfg, hc, run_dir, interrupts, console)
+    except KeyboardInterrupt:                       # raised only while nothing was being written
+        console(f"run {run_dir}: interrupted before it started; nothing recorded")
+        return EXIT_CODES["aborted"]
+    finally:
+        interrupts.phase = "writing"
+
+
+def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
     try:
         check_targets(cfg)
         _refuse_parallel_hardware(cfg, hc)
-        if cfg.resume and not cfg.plan_only and resume.decide(run_dir, OmegaConf.to_yaml(cfg, resolve=True)) == "skip":
+        decision = "run"
+        if cfg.resume and not cfg.plan_only:
+            with interrupts.during("writing"):        # an earlier attempt may be moved aside
+                decision = resume.decide(run_dir, OmegaConf.to_yaml(cfg, resolve=True), analyze=cfg.analyze)
+        if decision == "skip":
             console(f"run {run_dir}: skipped (succeeded before with the same config and code)")
             return 0
-        result = run_protocol(cfg, run_dir, overrides=list(hc.overrides.task), console=console)
-    except ValueError as exc:                       # ProtocolError, ConfigError: bad input
+        if decision == "analyse":
+            console(f"run {run_dir}: recorded before with the same config and code; its analysis is missing "
+                    f"or incomplete: analysing it again")
+            result = RunResult("success", run_dir, None, run_dir / "run.zarr")
+        else:
+            result = run_protocol(cfg, run_dir, overrides=list(hc.overrides.task), console=console,
+                                  interrupts=interrupts)
+        interrupts.phase = "writing"                  # the run is recorded: a signal now skips the analysis
+    except ValueError as exc:                       # ProtocolError, ConfigError, RunDirBusy: bad input
         _report(cfg, exc, "error")
         return BAD_INPUT
     except Exception as exc:
@@ -60,14 +96,27 @@ def run_job(cfg, console=console) -> int:
         return EXIT_CODES["failed"]
     if result.status == "planned":
         return 0
+    detail = f" ({result.error})" if result.error else ""
+    code = EXIT_CODES.get(result.status, 1)
+    if cfg.analyze and interrupts.count and result.status != "failed":
+        console(f"run {run_dir}: {result.status}{detail}; not analysed (stopped by the operator): "
+                f"`tactile-analyze run={result.store}`")
+        return code
     if cfg.analyze and result.status in ("success", "aborted"):
         try:
-            hand_off(result, cfg.analysis, console=console)
+            with interrupts.during("analysis"):
+                hand_off(result, cfg.analysis, console=console)
+        except KeyboardInterrupt:
+            console(f"run {run_dir}: {result.status}{detail}; analysis interrupted (none of it written); "
+                    f"analyse it with `tactile-analyze run={result.store}`")
+            return EXIT_CODES["aborted"]
         except Exception as exc:                    # the recording is safe; say what went wrong
             _report(cfg, exc, "analysis failed")
-    detail = f" ({result.error})" if result.error else ""
-    console(f"run {result.run_dir}: {result.status}{detail}")
-    return EXIT_CODES.get(result.status, 1)
+            console(f"run {run_dir}: {result.status}{detail}, recorded; analysis failed ({type(exc).__name__}); "
+                    f"analyse it again with `tactile-analyze run={result.store}`")
+            return code or EXIT_CODES["failed"]
+    console(f"run {run_dir}: {result.status}{detail}")
+    return code
 
 
 def _report(cfg, exc: Exception, what: str) -> None:
@@ -93,26 +142,36 @@ def _app(cfg) -> None:
 
 def main() -> None:
     register()
-    # Hydra raises composition errors (unknown keys, bad YAML...) instead of printing its own
-    # traceback; they are bad input, reported here as one line.
-    os.environ["HYDRA_FULL_ERROR"] = "1"
     logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
-    try:
-        _app()
-    except Exception as exc:
-        if "verbose=true" in sys.argv[1:]:
-            traceback.print_exception(exc)
-        print(f"error: {one_line(exc)}", file=sys.stderr)
-        sys.exit(BAD_INPUT)
+    _interrupts.install()                    # the run owns Ctrl-C and SIGTERM (protocols.interrupts)
+    run_app(_app)                            # protocols are data: no Hydra settings, no code
     sys.exit(_exit["code"])
 
 
-def one_line(exc: BaseException) -> str:
-    """An exception and its cause as one line (Hydra's messages span several)."""
-    parts = [str(exc)]
-    if exc.__cause__ is not None and str(exc.__cause__) not in parts[0]:
-        parts.append(str(exc.__cause__))
-    return "; ".join(line.strip() for part in parts for line in part.splitlines() if line.strip())
+class RunDirLock(Callback):
+    """One run directory, one writer: lock ``hydra.run.dir`` (``hydra.sweep.dir`` with ``-m``)
+    before Hydra writes anything there (:mod:`protocols.rundir`); a second ``tactile-run``
+    on the same directory is refused with one line, exit 2, leaving the first one's files alone."""
+
+    def on_run_start(self, config, **kwargs) -> None:
+        self._take(config.hydra.run.dir)
+
+    def on_run_end(self, config, **kwargs) -> None:
+        rundir.release(config.hydra.run.dir)
+
+    def on_multirun_start(self, config, **kwargs) -> None:
+        self._take(config.hydra.sweep.dir)
+
+    def on_multirun_end(self, config, **kwargs) -> None:
+        rundir.release(config.hydra.sweep.dir)
+
+    @staticmethod
+    def _take(directory) -> None:
+        try:
+            rundir.acquire(directory)
+        except rundir.RunDirBusy as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            raise SystemExit(BAD_INPUT) from None      # Hydra turns a callback's exceptions into warnings
 
 
 class SweepSummary(Callback):
@@ -126,8 +185,11 @@ class SweepSummary(Callback):
         rows = sweep_rows(root)
         if rows:
             write_summary(root, rows)
-            print(f"sweep {root}: {len(rows)} runs, "
-                  f"{sum(r['status'] == 'success' for r in rows)} succeeded; summary.md, summary.csv")
+            unanalysed = sum(r["status"] == "success" and r["analysis"] != "complete" for r in rows) \
+                if config.get("analyze") else 0
+            print(f"sweep {root}: {len(rows)} runs, {sum(r['status'] == 'success' for r in rows)} succeeded"
+                  + (f", {unanalysed} of them not (completely) analysed" if unanalysed else "")
+                  + "; summary.md, summary.csv")
 
 
 def sweep_rows(root: Path) -> list[dict]:
@@ -139,10 +201,11 @@ def sweep_rows(root: Path) -> list[dict]:
         overrides_file = job / ".hydra" / "overrides.yaml"
         overrides = OmegaConf.load(overrides_file) if overrides_file.exists() else []
         row = {"job": job.name, "overrides": " ".join(overrides), "status": info.get("status"),
-               "run_id": info.get("run_id"), "error": info.get("error") or ""}
-        summary = job / "summary.json"
-        if summary.exists():
-            row.update({f"result.{k}": v for k, v in json.loads(summary.read_text()).get("headline", {}).items()})
+               "run_id": info.get("run_id"), "error": info.get("error") or "",
+               "analysis": resume.analysis_state(job)}
+        if row["analysis"] == "complete":                # results only from a whole analysis
+            row.update({f"result.{k}": v for k, v in json.loads((job / "summary.json").read_text())
+                        .get("headline", {}).items()})
         rows.append(row)
     return rows
 

@@ -4,7 +4,9 @@ Lifecycle (as Bluesky's RunEngine): ``running`` → one of
 
 - ``success``: every step ended;
 - ``aborted``: the operator stopped the run (Ctrl-C or SIGTERM once: the current motion is
-  stopped, the finger retracted, the store closed; Ctrl-C twice: stop at once, no retract);
+  stopped, the finger retracted, the store closed; Ctrl-C twice: stop at once, no retract;
+  a signal before the first step: the run stops there); the signals are owned by the run's
+  :class:`~protocols.interrupts.Interrupts` from its start to the last byte written;
 - ``failed``: a step raised (device fault, protective stop, criterion never met...): motion
   stopped, the pump stopped, a retract if the arm is free to move, the error recorded.
 
@@ -17,9 +19,7 @@ last one, so ``on_slip`` reactions are issued in the period after the frame that
 
 from __future__ import annotations
 
-import signal
-import threading
-from contextlib import contextmanager
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +28,7 @@ from hardware.errors import DeviceError, ProtectiveStopError
 from tactile.slip import CAUSES
 
 from .interlocks import InterlockTripped, Interlocks, SafetyConfig
+from .interrupts import Interrupts
 from .plan import Geometry, Limits, Plan, PlannedStep
 from .steps import Criterion
 
@@ -83,6 +84,7 @@ class RunContext(Geometry):
         :class:`~protocols.interlocks.InterlockTripped` when a safety limit is breached."""
         t0 = self.clock.now()
         self.clock.sleep(self.poll)
+        self.recorder.keep_up()                   # a simulated clock waits for the store to keep up
         if self.progress:
             self.progress(self.clock.now() - t0)
         if self.stop_requested:
@@ -215,59 +217,93 @@ class _Unrecorded:
     def write_failure(self, max_age_s: float = 2.0) -> None:
         return None
 
+    def keep_up(self) -> None:
+        return None
+
 
 class RunEngine:
-    """Runs a :class:`~protocols.plan.Plan` on a connected lab, recording as it goes."""
+    """Runs a :class:`~protocols.plan.Plan` on a connected lab, recording as it goes.
 
-    def __init__(self, lab, recorder, cfg, plan: Plan, progress_factory=None, log=print, live=None):
+    ``interrupts``: the run's :class:`~protocols.interrupts.Interrupts` (installed by the
+    caller); without one the engine installs its own for the duration of :meth:`run`."""
+
+    def __init__(self, lab, recorder, cfg, plan: Plan, progress_factory=None, log=print, live=None,
+                 interrupts: Interrupts | None = None):
         self.lab, self.recorder, self.cfg, self.plan = lab, recorder, cfg, plan
         self.progress_factory = progress_factory
         self.log = log
         self.ctx = RunContext(lab, recorder, cfg, live=live)
         self._display = live.display if live is not None else None
-        self._interrupts = 0
+        self._own_interrupts = interrupts is None
+        self.interrupts = interrupts or Interrupts(log)
+        self.done = 0                              # steps ended so far
 
     def run(self, start_recording=None) -> Outcome:
-        """Run the plan. The recorder is started already, or (``start_recording``, a callable)
-        after the plan's setup steps, which then run unrecorded (a run that starts in contact)."""
-        done = 0
-        with self._signals():
-            try:
-                if start_recording is not None:
-                    recorder, self.ctx.recorder = self.ctx.recorder, _Unrecorded(self.ctx.clock)
-                    for planned in self.plan.steps[:self.plan.setup]:
-                        self._run_step(planned)
-                        done += 1
-                    self._start_recording(recorder, start_recording)
-                if self.cfg.protocol.get("tare", True):
-                    self.ctx.tare()
-                if self.ctx.live is not None:
-                    self.ctx.live.begin()
-                for planned in self.plan.steps[done:]:
-                    self._run_step(planned)
-                    done += 1
-                return Outcome(SUCCESS, steps_done=done)
-            except InterlockTripped as exc:
-                self.ctx.event("interlock", exc.name, {**exc.detail, "step": done})
-                self._make_safe(retract=True)
-                return Outcome(ABORTED, str(exc), done)
-            except RunAborted as exc:
-                self.ctx.event("abort", "operator", {"reason": str(exc), "step": done})
-                self._make_safe(retract=True)
-                reason = "stopped at once by a second Ctrl-C" if self._interrupts > 1 else str(exc)
-                return Outcome(ABORTED, reason, done)
-            except KeyboardInterrupt:
-                self.ctx.event("abort", "operator", {"reason": "second Ctrl-C: immediate stop", "step": done})
-                self._make_safe(retract=False)
-                return Outcome(ABORTED, "stopped at once by a second Ctrl-C", done)
-            except Exception as exc:  # a failing step must still leave the robot safe
-                message = f"{type(exc).__name__}: {exc}"
-                self.ctx.event("error", self.plan.steps[done].name if done < len(self.plan.steps) else "engine",
-                               {"error": message, "step": done})
-                self._make_safe(retract=not self.lab.arm.is_protective_stopped())
-                return Outcome(FAILED, message, done)
-            finally:
+        """Run the plan; never raises past the safe stop (the outcome says what happened).
+        The recorder is started already, or (``start_recording``, a callable) after the plan's
+        setup steps, which then run unrecorded (a run that starts in contact)."""
+        self.done = 0
+        installed = self.interrupts.installed() if self._own_interrupts else nullcontext()
+        with installed, self.interrupts.during("motion", on_stop=self._request_stop):
+            if self.interrupts.count:
+                self.ctx.event("abort", "operator", {"reason": "signal before the first step", "step": 0})
                 self._stop_pump()
+                return Outcome(ABORTED, "stopped by the operator before the first step", 0)
+            try:
+                return self._run_plan(start_recording)
+            except KeyboardInterrupt:      # the second Ctrl-C landed while the first was being handled
+                self._make_safe(retract=False)
+                return Outcome(ABORTED, "stopped at once by a second Ctrl-C", self.done)
+
+    def _run_plan(self, start_recording=None) -> Outcome:
+        try:
+            if start_recording is not None:
+                recorder, self.ctx.recorder = self.ctx.recorder, _Unrecorded(self.ctx.clock)
+                for planned in self.plan.steps[:self.plan.setup]:
+                    self._run_step(planned)
+                    self.done += 1
+                self._start_recording(recorder, start_recording)
+            if self.cfg.protocol.get("tare", True):
+                self.ctx.tare()
+            if self.ctx.live is not None:
+                self.ctx.live.begin()
+            for planned in self.plan.steps[self.done:]:
+                self._run_step(planned)
+                self.done += 1
+            return Outcome(SUCCESS, steps_done=self.done)
+        except InterlockTripped as exc:
+            self.ctx.event("interlock", exc.name, {**exc.detail, "step": self.done})
+            self._make_safe(retract=True)
+            return Outcome(ABORTED, str(exc), self.done)
+        except RunAborted as exc:
+            self.ctx.event("abort", "operator", {"reason": str(exc), "step": self.done})
+            self._make_safe(retract=True)
+            reason = "stopped at once by a second Ctrl-C" if self.interrupts.motion_signals > 1 else str(exc)
+            return Outcome(ABORTED, reason, self.done)
+        except KeyboardInterrupt:
+            self.ctx.event("abort", "operator", {"reason": "second Ctrl-C: immediate stop", "step": self.done})
+            self._make_safe(retract=False)
+            return Outcome(ABORTED, "stopped at once by a second Ctrl-C", self.done)
+        except Exception as exc:  # a failing step must still leave the robot safe
+            message = f"{type(exc).__name__}: {exc}"
+            step = self.plan.steps[self.done].name if self.done < len(self.plan.steps) else "engine"
+            self.ctx.event("error", step, {"error": message, "step": self.done})
+            self._make_safe(retract=self._arm_free())
+            return Outcome(FAILED, message, self.done)
+        finally:
+            self._stop_pump()
+
+    def _request_stop(self) -> None:
+        self.ctx.stop_requested = True
+
+    def _arm_free(self) -> bool:
+        """Whether the arm can be moved away: not in a protective stop, and still answering
+        (a lost link is no reason to skip the stop, but it is one not to retract)."""
+        try:
+            return not self.lab.arm.is_protective_stopped()
+        except Exception as exc:                # noqa: BLE001 - whatever the driver raises
+            self.log(f"warning: the arm does not answer ({type(exc).__name__}: {exc}); not retracting")
+            return False
 
     def _start_recording(self, recorder, start) -> None:
         """Drop what the devices buffered during the setup, start the recorder, and record the
@@ -312,15 +348,26 @@ class RunEngine:
         self.ctx.event("step_end", planned.name, {"key": step.key})
 
     def _make_safe(self, retract: bool) -> None:
-        """Stop motion and the pump; optionally back the finger away along the approach."""
+        """Stop motion and the pump; optionally back the finger away along the approach.
+        Never raises: what could not be done is logged (the reason we stop comes first)."""
         arm = self.lab.arm
         try:
             arm.stop(self.ctx.limits.max_accel)
-            self._stop_pump()
-            if getattr(self.lab, "stage", None) is not None:
+        except KeyboardInterrupt:                 # the second Ctrl-C cut the command: once more, no retract
+            arm.stop(self.ctx.limits.max_accel)   # (a third signal is only noted)
+            retract = False
+        except Exception as exc:                  # noqa: BLE001 - e.g. the link is gone
+            self.log(f"warning: could not stop the arm: {exc}")
+            retract = False
+        self._stop_pump()
+        if getattr(self.lab, "stage", None) is not None:
+            try:
                 self.lab.stage.stop()
-            if not retract:
-                return
+            except Exception as exc:              # noqa: BLE001 - never mask the reason we stop
+                self.log(f"warning: could not stop the object stage: {exc}")
+        if not retract:
+            return
+        try:
             self.ctx.stop_requested = False          # the retract itself must be allowed to run
             self._wait_still(SETTLE_S)
             target = self.ctx.pose
@@ -344,30 +391,12 @@ class RunEngine:
             self.ctx.clock.sleep(self.ctx.poll)
 
     def _stop_pump(self) -> None:
-        try:
-            self.lab.pump.stop()
-        except Exception as exc:
-            self.log(f"warning: could not stop the pump: {exc}")
-
-    @contextmanager
-    def _signals(self):
-        """Ctrl-C / SIGTERM once: stop safely; Ctrl-C twice: stop at once."""
-        if threading.current_thread() is not threading.main_thread():
-            yield
-            return
-
-        def on_signal(signum, frame):
-            self._interrupts += 1
-            if self._interrupts == 1:
-                self.ctx.stop_requested = True
-                self.log("\nstopping safely: finishing the current motion, retracting "
-                         "(Ctrl-C again to stop at once)")
-            else:
-                raise KeyboardInterrupt
-
-        old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            yield
-        finally:
-            for s, handler in old.items():
-                signal.signal(s, handler)
+        for _ in range(2):                        # a Ctrl-C may cut the command: once more
+            try:
+                self.lab.pump.stop()
+                return
+            except KeyboardInterrupt:
+                continue
+            except Exception as exc:
+                self.log(f"warning: could not stop the pump: {exc}")
+                return

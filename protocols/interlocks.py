@@ -39,6 +39,7 @@ class SafetyConfig:
     contact_threshold: float = 30.0    # counts of PDC above the tare
     stale_periods: int = 30            # BioTac frame periods (host stalls of ~0.2 s seen under load)
     recording_stall_s: float = 2.0     # s of wall time without a successful commit
+    max_duration_s: float = 7200.0     # s, the longest a protocol may be planned to run (checked by the plan)
     on_protective_stop: str = "abort"  # "abort": fail the run; "recover": unlock, redo the step once
 
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from omegaconf import OmegaConf
 
-from hardware.hand import JOINT_NAMES
+from hardware.errors import brief
 from hardware.sim.geometry import rotvec_to_matrix
 from hardware.sim.surfaces import Surface, load_surface
 from tactile.geometry import fit_ellipsoid, load_taxels
@@ -24,6 +24,8 @@ from .steps import Criterion, ProtocolError, Repeat, Step, parse_steps
 
 UR10_REACH_M = 1.3          # UR10 working radius from the base axis
 MAX_STEPS = 10_000          # expanded steps: far beyond any lab protocol, short of a runaway repeat
+JOINT_RANGE_RAD = math.pi / 2   # no Shadow Hand joint moves beyond ±π/2 rad
+DEFAULT_MAX_DURATION_S = 7200.0
 
 
 @dataclass(frozen=True)
@@ -36,14 +38,17 @@ class Limits:
     max_accel: float                 # m/s²
     max_force: float                 # N
     max_pump_rate: float             # ml/min
+    max_hand_velocity: float = math.inf   # rad/s
     reach: float = UR10_REACH_M      # m
 
     @classmethod
     def from_hardware(cls, hw) -> "Limits":
+        hand = hw.get("hand") or {}
         return cls(workspace_min=np.asarray(hw.workspace.min_m, float),
                    workspace_max=np.asarray(hw.workspace.max_m, float),
                    max_speed=float(hw.arm.max_speed_m_s), max_accel=float(hw.arm.max_accel_m_s2),
-                   max_force=float(hw.arm.max_contact_force_n), max_pump_rate=float(hw.pump.max_rate_ml_min))
+                   max_force=float(hw.arm.max_contact_force_n), max_pump_rate=float(hw.pump.max_rate_ml_min),
+                   max_hand_velocity=float(hand.get("max_velocity_rad_s", math.inf)))
 
 
 class Geometry:
@@ -146,29 +151,26 @@ class PlannedStep:
 
 
 class PlanContext(Geometry):
-    """The planner's running state: planned pose and time, parameters, limits."""
+    """The planner's running state: planned pose, time and hand targets, parameters, limits."""
 
-    def __init__(self, hw, surface, params, limits: Limits):
+    def __init__(self, hw, surface, params, limits: Limits, max_duration: float = DEFAULT_MAX_DURATION_S):
         super().__init__(hw, surface, params.finger)
-        self.params, self.limits = params, limits
+        self.params, self.limits, self.max_duration = params, limits, max_duration
         self.pose = self.home.copy()
         self.time = 0.0
         self.pour_until = None
-        self.joint_names = set(JOINT_NAMES)
         self.stage_pose = np.zeros(3)      # planned object stage pose [x, y] m, [rz] rad from home
+        self.hand_targets: dict[str, float] = {}          # joint angles commanded so far (rad)
 
     def linear(self, target, speed_mm_s: float, key: str):
         """Plan a straight move at ``speed_mm_s``; check the target, speed and acceleration."""
         speed = speed_mm_s * 1e-3
         accel = self.params.accel * 1e-3
         if not speed > 0:
-            raise ProtocolError(f"{key}.speed", f"expected a speed > 0 mm/s, got {speed_mm_s}")
+            raise ProtocolError(f"{key}.speed", f"expected a speed > 0 mm/s, got {brief(speed_mm_s)}")
         if speed > self.limits.max_speed:
-            raise ProtocolError(f"{key}.speed", f"{speed_mm_s} mm/s exceeds the arm's limit "
+            raise ProtocolError(f"{key}.speed", f"{brief(speed_mm_s)} mm/s exceeds the arm's limit "
                                                 f"hardware.arm.max_speed_m_s={self.limits.max_speed}")
-        if accel > self.limits.max_accel:
-            raise ProtocolError("protocol.accel", f"{self.params.accel} mm/s² exceeds the arm's limit "
-                                                  f"hardware.arm.max_accel_m_s2={self.limits.max_accel}")
         self.check_reachable(target, key)
         distance = float(np.linalg.norm(np.asarray(target[:3]) - self.pose[:3]))
         duration = trapezoid_time(distance, speed, accel)
@@ -176,20 +178,48 @@ class PlanContext(Geometry):
         self.time += duration
         return [self.pose.copy()], duration
 
+    def check_parameters(self) -> None:
+        """The protocol-level parameters, whichever steps use them: finite numbers, and
+        ``accel`` within the arm's limit."""
+        for name, value in self.params.items():
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ProtocolError(f"protocol.{name}", f"expected a finite number, got {brief(value)}")
+        if not 0 < self.params.accel * 1e-3 <= self.limits.max_accel:
+            raise ProtocolError("protocol.accel", f"expected an acceleration in (0, {self.limits.max_accel * 1e3:g}] "
+                                                  f"mm/s² (hardware.arm.max_accel_m_s2), "
+                                                  f"got {brief(self.params.accel)}")
+
     def check_reachable(self, pose, key: str) -> None:
         if not np.all(np.isfinite(np.asarray(pose, float))):
-            raise ProtocolError(key, f"waypoint {list(pose)} is not finite (a NaN or infinite parameter?)")
+            raise ProtocolError(key, f"waypoint {_point(pose)} is not finite "
+                                     f"(a NaN or infinite parameter?)")
         p = np.asarray(pose[:3], float)
         lo, hi = self.limits.workspace_min, self.limits.workspace_max
         for axis, name in enumerate("xyz"):
             if p[axis] < lo[axis] or p[axis] > hi[axis]:
                 bound = ("min_m", lo[axis]) if p[axis] < lo[axis] else ("max_m", hi[axis])
-                raise ProtocolError(key, f"waypoint {np.round(p, 4).tolist()} m leaves the workspace envelope: "
-                                         f"{name} = {p[axis]:.4f} m is beyond hardware.workspace.{bound[0]}"
-                                         f"[{axis}] = {bound[1]} m")
+                raise ProtocolError(key, f"waypoint {_point(p)} m leaves the workspace envelope: {name} = "
+                                         f"{brief(round(float(p[axis]), 4))} m is beyond "
+                                         f"hardware.workspace.{bound[0]}[{axis}] = {bound[1]} m")
         if np.hypot(p[0], p[1]) > self.limits.reach:
-            raise ProtocolError(key, f"waypoint {np.round(p, 4).tolist()} m is out of the arm's reach "
+            raise ProtocolError(key, f"waypoint {_point(p)} m is out of the arm's reach "
                                      f"({self.limits.reach} m from the base axis)")
+
+    def hand(self, targets: dict[str, float], duration: float, key: str, commit: bool = True) -> None:
+        """Check hand joint targets (rad) reached in ``duration`` s from the planned ones: every
+        angle within ±:data:`JOINT_RANGE_RAD`, no joint faster than the hand's limit
+        (``hardware.hand.max_velocity_rad_s``); with ``commit`` they become the planned ones."""
+        for name, value in targets.items():
+            if not abs(value) <= JOINT_RANGE_RAD:
+                raise ProtocolError(key, f"{name} target {brief(value)} rad is beyond the hand's range "
+                                         f"±{JOINT_RANGE_RAD:.4g} rad")
+        change = max((abs(v - self.hand_targets.get(n, 0.0)) for n, v in targets.items()), default=0.0)
+        if change > self.limits.max_hand_velocity * duration:
+            raise ProtocolError(key, f"moves a joint {change:.3g} rad in {brief(duration)} s, faster than "
+                                     f"hardware.hand.max_velocity_rad_s={self.limits.max_hand_velocity:g}; "
+                                     f"give it a longer duration")
+        if commit:
+            self.hand_targets.update(targets)
 
     def check_criterion(self, crit: Criterion | None, key: str) -> None:
         if crit is None:
@@ -205,6 +235,11 @@ class PlanContext(Geometry):
             value = getattr(crit, name)
             if value is not None and not value > 0:
                 raise ProtocolError(f"{key}.{name}", f"expected a threshold > 0 counts, got {value}")
+
+
+def _point(p) -> str:
+    """A position (m) for a message, to 0.1 mm."""
+    return "[" + ", ".join(brief(round(float(v), 4)) for v in p) + "]"
 
 
 def trapezoid_time(distance: float, speed: float, accel: float) -> float:
@@ -239,7 +274,8 @@ class Plan:
 
 
 def make_plan(cfg) -> Plan:
-    """Parse and check ``cfg.protocol`` against ``cfg.hardware`` and ``cfg.surface``.
+    """Parse and check ``cfg.protocol`` against ``cfg.hardware`` and ``cfg.surface``, and its
+    expected duration against ``safety.max_duration_s``.
 
     Raises :class:`ProtocolError` (or the hardware's ``ConfigError``) naming the key at
     fault; never touches hardware.
@@ -248,7 +284,9 @@ def make_plan(cfg) -> Plan:
     raw = OmegaConf.to_container(params.steps, resolve=True) if OmegaConf.is_config(params.steps) else params.steps
     steps = parse_steps(raw)
     surface = load_surface(cfg.surface) if cfg.get("surface") is not None else None
-    ctx = PlanContext(cfg.hardware, surface, params, Limits.from_hardware(cfg.hardware))
+    max_duration = _max_duration(cfg)
+    ctx = PlanContext(cfg.hardware, surface, params, Limits.from_hardware(cfg.hardware), max_duration)
+    ctx.check_parameters()
     if params.finger not in cfg.hardware.fingers:
         raise ProtocolError("protocol.finger", f"{params.finger!r} has no sensor in hardware.fingers "
                                                f"{list(cfg.hardware.fingers)}")
@@ -266,6 +304,9 @@ def make_plan(cfg) -> Plan:
                 continue
             start = ctx.time
             waypoints, duration = s.plan(ctx)
+            if not ctx.time <= max_duration:
+                raise ProtocolError(s.key, f"the protocol would run {brief(ctx.time)} s by the end of this step, "
+                                           f"longer than safety.max_duration_s={max_duration:g} s")
             planned.append(PlannedStep(len(planned), s, start, duration, waypoints))
 
     walk(steps)
@@ -282,6 +323,15 @@ def _setup_steps(params, planned: list[PlannedStep]) -> int:
                                              "add a `press` step (it and the steps before it run before the "
                                              "recording starts)")
     return presses[0] + 1
+
+
+def _max_duration(cfg) -> float:
+    """``safety.max_duration_s``: the longest a protocol may be planned to run (s)."""
+    value = OmegaConf.select(cfg, "safety.max_duration_s", default=DEFAULT_MAX_DURATION_S) \
+        if OmegaConf.is_config(cfg) else DEFAULT_MAX_DURATION_S
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < math.inf:
+        raise ProtocolError("safety.max_duration_s", f"expected a number of s > 0, got {brief(value)}")
+    return float(value)
 
 
 def format_timeline(plan: Plan) -> str:

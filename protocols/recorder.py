@@ -13,8 +13,12 @@ One acquisition thread per stream polls its device's non-blocking drain method e
 and queues the samples; a device error becomes a ``fault`` event and marks the stream
 stale, and the thread keeps retrying. A writer thread converts the queued samples to
 arrays, stamps them with the stream's clock model (:mod:`protocols.clockmodel`), appends
-them and commits the store every ``flush_interval_s`` of *wall* time, so a crash loses at
-most about that much. :meth:`Recorder.stop` drains every stream, flushes, refits each clock
+them and commits the store every ``flush_interval_s`` of wall time or :data:`RUN_FLUSH_S` of
+the run's own clock time, whichever comes first; a simulated clock faster than real time is
+held back while the last commit is :data:`MAX_BEHIND_S` behind (:meth:`Recorder.keep_up`),
+so a crash loses less than a second of either. (Each commit rewrites the last partial chunk
+of every array: commits every 0.75 s of run time cost a simulated run at 4× real time about
+a third of its speed; every 0.5 s, half.) :meth:`Recorder.stop` drains every stream, flushes, refits each clock
 model on the whole run, rewrites the time coordinates and closes the store.
 
 Times in the store are seconds since run start: ``t0 = clock.now()`` at :meth:`start`,
@@ -33,6 +37,7 @@ from typing import Callable
 import numpy as np
 
 from hardware.biotac import PAC_RATE_HZ
+from hardware.device import batch_times
 
 from .clockmodel import OnlineClockModel, latency_stats, sequence_gaps
 from .store import RunStore, utc_now
@@ -40,6 +45,9 @@ from .store import RunStore, utc_now
 log = logging.getLogger(__name__)
 
 STREAMS = ("biotac", "arm", "hand", "pump", "scale", "stage")
+WAKE_S = 0.02                 # wall s between the writer's looks at the clocks
+RUN_FLUSH_S = 0.75            # run s between commits of a clock faster than the wall (a simulated lab)
+MAX_BEHIND_S = 0.95           # run s a free-running (simulated) clock may run ahead of the last commit
 _I16 = np.iinfo(np.int16)
 
 
@@ -62,19 +70,20 @@ def biotac_columns(frames) -> dict[str, np.ndarray]:
             "tac": _i16([f.tac for f in frames])}
 
 
-def pac_columns(frames, rate_hz: float = PAC_RATE_HZ) -> dict[str, np.ndarray]:
+def pac_columns(frames, rate_hz: float = PAC_RATE_HZ, previous: float | None = None) -> dict[str, np.ndarray]:
     """PAC samples of ``frames`` → (M, F) pac, (M,) device_time, host_time (s, raw).
 
-    A frame's n PAC samples are taken to end at the frame's timestamp, 1/rate apart:
-    sample k (0..n−1) at ``device_time − (n−1−k)/rate``; host_time is the frame's.
+    A frame's n PAC samples end at the frame's timestamp, 1/rate apart — closer when a
+    frame follows the one before sooner than its samples span (stamps jitter), so the times
+    increase strictly (:func:`hardware.device.batch_times`; ``previous``: the device time of
+    the last PAC sample before these frames); host_time is the frame's.
     """
     pac = [np.asarray(f.pac).T for f in frames]                       # (n, F) each
-    dt = [f.device_time - (len(p) - 1 - np.arange(len(p))) / rate_hz for f, p in zip(frames, pac)]
-    ht = [np.full(len(p), f.host_time) for f, p in zip(frames, pac)]
+    counts = [len(p) for p in pac]
     F = pac[0].shape[1] if pac else 0
     return {"pac": _i16(np.concatenate(pac)) if pac else np.zeros((0, F), np.int16),
-            "device_time": np.concatenate(dt) if dt else np.zeros(0),
-            "host_time": np.concatenate(ht) if ht else np.zeros(0)}
+            "device_time": batch_times([f.device_time for f in frames], counts, 1.0 / rate_hz, previous),
+            "host_time": np.repeat(np.array([f.host_time for f in frames], float), counts)}
 
 
 def arm_columns(states) -> dict[str, np.ndarray]:
@@ -159,7 +168,8 @@ class Recorder:
         sources: stream name (``biotac``, ``arm``, ``hand``, ``pump``, ``scale``) → the device's
             non-blocking drain method (``lab.biotac.read``, ``lab.arm.read_states``, ...).
         clock: the devices' :class:`~hardware.device.Clock` (``now()``, ``sleep()``).
-        flush_interval_s: wall-clock seconds between commits (the most a crash loses).
+        flush_interval_s: wall-clock seconds between commits (with :data:`RUN_FLUSH_S` of
+            clock time, whichever comes first: about the most a crash loses).
         poll_interval_s: clock seconds between polls of a source.
         retry_interval_s: clock seconds between retries of a failing source.
         min_latency_s: known minimum transport latency per stream (s) subtracted by the
@@ -188,6 +198,7 @@ class Recorder:
         self._live: list[dict] = []                       # rows of the online flow (protocols.live)
         self._outbox: dict[str, list[dict]] = {}          # block -> column dicts not yet appended
         self._last_seq: int | None = None                 # newest BioTac frame written
+        self._last_device: dict[str, tuple] = {}          # block -> (device, run) time of its last sample
         self._last_frame_time: float | None = None
         self._lock = threading.Lock()                     # stats, pending samples, events
         self._flush_lock = threading.Lock()               # one flush at a time
@@ -200,6 +211,8 @@ class Recorder:
         self.flush_durations: list[float] = []            # wall s per flush (convert+append+commit)
         self.writer_error: BaseException | None = None
         self.stopped = False
+        self._committed = threading.Condition()
+        self._committed_clock: float | None = None        # clock time up to which every sample is committed
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> "Recorder":
@@ -221,7 +234,12 @@ class Recorder:
     def stop(self, status: str = "success", truth: dict | None = None, attrs: dict | None = None) -> dict:
         """Drain every source, flush, refit the clock models, rewrite the time coordinates,
         write ``truth`` (the simulator's ground truth, if given) and close the store with
-        ``status`` and ``attrs``. Returns :meth:`stats`. Idempotent."""
+        ``status`` and ``attrs``. Returns :meth:`stats`. Idempotent.
+
+        If any of that fails (a full disk...) the store is closed ``failed`` — a run that
+        could not record everything it received is never ``success`` — with the error in
+        ``recorder_error`` (and ``error``), and the first error is re-raised; if even the
+        close fails the store stays at its last commit (``running``: ``tactile-recover``)."""
         if self.stopped:
             return self.stats()
         if self.t0 is None:                       # never started: just close the store
@@ -251,8 +269,13 @@ class Recorder:
             attempt(lambda: self.store.write_tree("truth", truth, attrs={
                 "long_name": "simulator ground truth",
                 "time_base": "simulated clock (s); subtract the root attribute t0_clock_s for time since run start"}))
-        extra = {"recorder_error": f"{type(errors[0]).__name__}: {errors[0]}"} if errors else {}
-        self.store.close(status, streams=summary, **extra, **(attrs or {}))
+        attrs = dict(attrs or {})
+        if errors:
+            status = "failed"
+            attrs["recorder_error"] = f"{type(errors[0]).__name__}: {errors[0]}"
+            attrs["error"] = "; ".join(filter(None, [f"recording failed: {attrs['recorder_error']}",
+                                                     attrs.get("error")]))
+        self.store.close(status, streams=summary, **attrs)
         self.stopped = True
         if errors:
             raise errors[0]
@@ -293,6 +316,21 @@ class Recorder:
         st = self._stats[stream]
         ref = st.last_host_time if st.last_host_time is not None else self._require_started()
         return max(0.0, float(self.clock.now()) - ref)
+
+    def keep_up(self, max_behind_s: float = MAX_BEHIND_S, timeout_s: float = 2.0) -> None:
+        """Hold back the driver of a free-running clock (a simulated lab faster than real time:
+        its clock has ``realtime = False``) while the last commit is more than ``max_behind_s``
+        of run time behind, so a crash loses no more run time than that even when the writer
+        lags. Returns at once for real clocks (time cannot wait), after ``timeout_s`` of wall
+        time at most, and while the writer is failing (the ``recording_failed`` interlock's case)."""
+        if getattr(self.clock, "realtime", True) or self.t0 is None:
+            return
+        deadline = time.monotonic() + timeout_s
+        with self._committed:
+            while (float(self.clock.now()) - (self._committed_clock or self.t0) > max_behind_s
+                   and self.writer_error is None and not self._writer_stop.is_set()):
+                if not self._committed.wait(max(0.0, deadline - time.monotonic())):
+                    return
 
     def write_failure(self, max_age_s: float = 2.0) -> str | None:
         """Why the store has not been committed for ``max_age_s`` of wall time (a full disk,
@@ -367,10 +405,17 @@ class Recorder:
 
     # ------------------------------------------------------------------ writing
     def _write_loop(self) -> None:
-        # deadlines from the previous flush's start, so a slow flush does not add to the interval
-        due = time.monotonic() + self.flush_interval_s
-        while not self._writer_stop.wait(max(0.0, due - time.monotonic())):
-            due = time.monotonic() + self.flush_interval_s
+        # A commit is due flush_interval_s of wall time or RUN_FLUSH_S of the run's own (clock)
+        # time after the previous one started, whichever comes first: a simulated run several
+        # times faster than real time would otherwise lose seconds of its own time to a crash.
+        # Deadlines run from the previous flush's start, so a slow flush does not add to them.
+        wall_due = time.monotonic() + self.flush_interval_s
+        run_due = float(self.clock.now()) + RUN_FLUSH_S
+        while not self._writer_stop.wait(min(self.flush_interval_s, WAKE_S)):
+            if time.monotonic() < wall_due and float(self.clock.now()) < run_due:
+                continue
+            wall_due = time.monotonic() + self.flush_interval_s
+            run_due = float(self.clock.now()) + RUN_FLUSH_S
             try:
                 self._flush()
             except Exception as e:               # noqa: BLE001 - keep the samples, retry next time
@@ -380,7 +425,7 @@ class Recorder:
     def _flush(self) -> None:
         """Convert every queued sample and event to columns, append them, commit."""
         with self._flush_lock:
-            w0 = time.monotonic()
+            w0, c0 = time.monotonic(), float(self.clock.now())
             with self._lock:
                 taken = {s: st.pending for s, st in self._stats.items()}
                 for st in self._stats.values():
@@ -401,6 +446,10 @@ class Recorder:
             self.store.commit()
             self.commit_wall_times.append(time.monotonic())
             self.flush_durations.append(time.monotonic() - w0)
+            self.writer_error = None                       # recording is healthy again
+            with self._committed:
+                self._committed_clock = c0                 # every sample received before c0 is in
+                self._committed.notify_all()
 
     def _convert(self, name: str, samples: list) -> None:
         lay = LAYOUTS[name]
@@ -410,13 +459,23 @@ class Recorder:
         self._stamp(cols, lay, model)
         self._outbox.setdefault(lay.block, []).append(cols)
         if name == "biotac":
-            pac = pac_columns(samples)
+            pac = pac_columns(samples, previous=self._last_device.get(PAC_LAYOUT.block, (None,))[0])
             self._stamp(pac, PAC_LAYOUT, model)
             self._outbox.setdefault(PAC_LAYOUT.block, []).append(pac)
             self._check_frames(cols)
 
     def _stamp(self, cols: dict, lay: Layout, model: OnlineClockModel) -> None:
-        cols[lay.time] = model.map(cols[lay.device]) - self.t0
+        """Times since run start of a batch, from the current clock model, never before the
+        batch before (the model is refitted as the run goes: a new fit must not move time
+        back across a flush; the final refit at :meth:`stop` rewrites all times on one fit)."""
+        d = cols[lay.device]
+        t = model.map(d) - self.t0
+        last = self._last_device.get(lay.block)
+        if last is not None and len(d):
+            t = np.maximum(t, last[1] + (d - last[0]))             # continue from the last sample
+        if len(d):
+            self._last_device[lay.block] = (float(d[-1]), float(t[-1]))
+        cols[lay.time] = t
         cols[lay.host] = cols[lay.host] - self.t0
 
     def _check_frames(self, cols: dict) -> None:

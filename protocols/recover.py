@@ -11,8 +11,12 @@ and there is no end time nor ``run.json``. Recovery
    marks the status ``crashed``;
 3. re-commits the store and writes ``run.json`` from the provenance kept in the store,
 
-so the run opens and analyses like any other. A store that is not ``running`` is left
-alone. Exit status: 0 recovered (or nothing to do), 2 not a run store.
+so the run opens and analyses like any other. Groups and arrays that no commit published
+(a ``truth`` group half-written at the kill) are deleted, not published. A store that is not
+``running`` is left alone (``run.json`` is written if it is missing). A run that is still
+recording (its process holds the run directory's lock, :mod:`.rundir`) is refused.
+Exit status: 0 recovered (or nothing to do), 2 not a run store or still recording, 1 the
+recovery could not be written (a full disk; nothing is lost).
 """
 
 from __future__ import annotations
@@ -26,8 +30,11 @@ from pathlib import Path
 import numpy as np
 import zarr
 
+from hardware.errors import brief
+
+from . import rundir
 from .provenance import write_run_json
-from .store import utc_now
+from .store import remove_debris, utc_now
 
 TIME_COORDS = ("time", "time_pac", "time_arm", "time_hand", "time_pump", "time_scale")
 
@@ -35,36 +42,93 @@ TIME_COORDS = ("time", "time_pac", "time_arm", "time_hand", "time_pump", "time_s
 def recover(path) -> dict:
     """Recover the run store at ``path``; returns what was done (for the console and tests).
 
-    Raises ``ValueError`` if ``path`` is not a run store.
+    Raises ``ValueError`` if ``path`` is not a run store (or its metadata is unreadable), or
+    if the run is still being recorded (:mod:`.rundir`: its process holds the lock);
+    ``OSError`` if the recovery cannot be written (a full disk: nothing is lost, run it again).
     """
     path = Path(path)
     if not (path / "zarr.json").exists():
         raise ValueError(f"{path}: not a run store (no zarr.json); expected the run.zarr directory of a run")
+    with rundir.locked(path.parent):             # never a store that a live run is writing
+        return _recover(path)
+
+
+def _recover(path: Path) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        committed = zarr.open_group(str(path), mode="r", use_consolidated=True)
-        status = committed.attrs.get("status")
-        if status is None or "run_id" not in committed.attrs:
+        try:
+            committed = zarr.open_group(str(path), mode="r", use_consolidated=True)
+            status, run_id = committed.attrs.get("status"), committed.attrs.get("run_id")
+        except Exception as exc:                # noqa: BLE001 - a corrupt zarr.json in any form
+            raise ValueError(f"{path}: not a readable run store: its zarr.json cannot be read "
+                             f"({type(exc).__name__}: {brief(str(exc), 120)})") from None
+        if status is None or run_id is None:
             raise ValueError(f"{path}: not a run store (no run_id/status attributes)")
+        debris = [p.name for p in remove_debris(path.parent)]
         if status != "running":
-            return {"path": str(path), "status": status, "action": "none: the run was closed"}
+            written = _run_json_of_closed(path, committed.attrs)
+            return {"path": str(path), "status": status, "action": "none: the run was closed",
+                    **({"run_json": "written"} if written else {}), **({"removed": debris} if debris else {})}
         trimmed, end = {}, 0.0
-        for name, arr in _walk(committed):
+        names = dict(_walk(committed))
+        for name, arr in names.items():
             live = zarr.open_array(str(path), path=name, mode="r+")
             if live.shape != arr.shape:
                 trimmed[name] = int(live.shape[0] - arr.shape[0])
                 live.resize(arr.shape)
             if name.rsplit("/", 1)[-1] in TIME_COORDS and arr.shape[0]:
-                end = max(end, float(np.asarray(arr[-1])))
+                try:
+                    end = max(end, float(np.asarray(arr[-1])))
+                except Exception as exc:        # noqa: BLE001 - a chunk that does not decode
+                    raise ValueError(f"{path}/{name}: its last chunk cannot be read ({type(exc).__name__}: "
+                                     f"{brief(str(exc), 120)}); the store is damaged") from None
+        unpublished = _drop_unpublished(path, set(names) | set(_groups(committed)))
         attrs = {"status": "crashed", "end_time": utc_now(), "recovered": True, "last_sample_s": end}
         zarr.open_group(str(path), mode="r+", use_consolidated=True).update_attributes(attrs)
         zarr.consolidate_metadata(str(path))
     provenance = dict(committed.attrs.get("provenance") or {})
-    provenance.setdefault("run_id", committed.attrs["run_id"])
+    provenance.setdefault("run_id", run_id)
     write_run_json(path.parent / "run.json", provenance, status="crashed", end_time=attrs["end_time"],
                    extra={"store": path.name, "recovered": True, "last_sample_s": end})
     return {"path": str(path), "status": "crashed", "last_sample_s": end, "trimmed": trimmed,
-            "action": "recovered"}
+            "dropped_unpublished": unpublished, "action": "recovered", **({"removed": debris} if debris else {})}
+
+
+def _drop_unpublished(path: Path, published: set[str]) -> list[str]:
+    """Delete the groups and arrays on disk that no commit published (e.g. a ``truth`` group
+    half-written when the run was killed): re-consolidating would publish them as if whole."""
+    root = zarr.open_group(str(path), mode="r+", use_consolidated=False)
+    dropped = []
+
+    def visit(group, prefix):
+        for name, _ in list(group.arrays()) + list(group.groups()):
+            full = f"{prefix}{name}"
+            if full not in published:
+                del group[name]
+                dropped.append(full)
+            elif full in published and isinstance(group[name], zarr.Group):
+                visit(group[name], f"{full}/")
+    visit(root, "")
+    return dropped
+
+
+def _run_json_of_closed(path: Path, attrs) -> bool:
+    """Write ``run.json`` of a closed store that has none (the disk filled as the run ended);
+    returns whether it was written."""
+    target = path.parent / "run.json"
+    if target.exists():
+        return False
+    provenance = dict(attrs.get("provenance") or {})
+    provenance.setdefault("run_id", attrs["run_id"])
+    write_run_json(target, provenance, status=attrs["status"], end_time=attrs.get("end_time"),
+                   extra={"store": path.name, "error": attrs.get("error"), "run_json_written_by": "tactile-recover"})
+    return True
+
+
+def _groups(group, prefix=""):
+    for name, sub in group.groups():
+        yield f"{prefix}{name}"
+        yield from _groups(sub, f"{prefix}{name}/")
 
 
 def _walk(group, prefix=""):
@@ -86,7 +150,12 @@ def main(argv=None) -> int:
             result = recover(store)
         except ValueError as exc:
             print(f"error: {exc}", file=sys.stderr)
-            code = 2
+            code = max(code, 2)
+            continue
+        except OSError as exc:                  # a full disk, a read-only mount: nothing is lost
+            print(f"error: {store}: the recovery could not be written ({type(exc).__name__}: {exc}); "
+                  f"nothing was lost: run tactile-recover again once it can write", file=sys.stderr)
+            code = max(code, 1)
             continue
         print(json.dumps(result))
     return code

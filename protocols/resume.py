@@ -5,7 +5,8 @@ skips every job whose run ended ``success`` — after checking that its recorded
 code version (git commit and diff hash) match what this job would run — and runs the
 others again, keeping the earlier attempt under ``previous/<n>/`` in the job directory. A
 mismatch is refused with the difference shown: resuming must never mix runs of different
-configurations or code in one sweep.
+configurations or code in one sweep. A skipped job whose analysis is missing or incomplete
+(:func:`analysis_state`; killed during the analysis) is analysed again (``"analyse"``).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import yaml
 from .provenance import git_state
 
 IGNORED_KEYS = ("resume", "progress", "verbose")
+KEPT = (".hydra", "previous", ".tactile.lock")     # never set aside: Hydra's record, earlier attempts, the lock
 
 
 class ResumeMismatch(ValueError):
@@ -34,10 +36,11 @@ def comparable_config(config_yaml: str) -> str:
     return yaml.safe_dump(cfg, sort_keys=True)
 
 
-def decide(run_dir, config_yaml: str, git: dict | None = None) -> str:
-    """``"skip"`` if ``run_dir`` holds a successful run of the same config and code,
-    ``"run"`` if it holds nothing or an unsuccessful run (moved to ``previous/<n>/``).
-    Raises :class:`ResumeMismatch` showing the difference otherwise."""
+def decide(run_dir, config_yaml: str, git: dict | None = None, analyze: bool = False) -> str:
+    """``"skip"`` if ``run_dir`` holds a successful run of the same config and code (and,
+    with ``analyze``, its complete analysis), ``"analyse"`` if only the analysis is missing
+    or incomplete, ``"run"`` if it holds nothing or an unsuccessful run (moved to
+    ``previous/<n>/``). Raises :class:`ResumeMismatch` showing the difference otherwise."""
     run_dir = Path(run_dir)
     run_json = run_dir / "run.json"
     if not run_json.exists():
@@ -59,12 +62,35 @@ def decide(run_dir, config_yaml: str, git: dict | None = None) -> str:
         if recorded.get(key) != git.get(key):
             raise ResumeMismatch(f"resume: {run_dir} was run with code {key} {recorded.get(key)}, this job "
                                  f"would run {git.get(key)}; refusing to mix code versions in one sweep")
-    return "skip"
+    return "analyse" if analyze and analysis_state(run_dir) != "complete" else "skip"
+
+
+def analysis_state(run_dir) -> str:
+    """``complete``, ``missing`` or ``incomplete``: the state of a run directory's analysis.
+
+    ``summary.json`` is the analysis's commit mark (written last, removed first when an
+    analysis replaces another: ``analysis.results.swap_in``), and ``analysis.zarr`` and
+    ``score.json`` carry the same ``analysis_id``; outputs without the mark, or with other
+    ids, are an analysis killed half-way."""
+    run_dir = Path(run_dir)
+    summary = run_dir / "summary.json"
+    if not summary.exists():
+        partial = any((run_dir / name).exists() for name in ("analysis.zarr", "score.json"))
+        return "incomplete" if partial else "missing"
+    ids = []
+    try:
+        ids.append(json.loads(summary.read_text())["analysis_id"])
+        ids.append(json.loads((run_dir / "analysis.zarr" / "zarr.json").read_text())["attributes"]["analysis_id"])
+        if (run_dir / "score.json").exists():
+            ids.append(json.loads((run_dir / "score.json").read_text())["analysis_id"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return "incomplete"
+    return "complete" if len(set(ids)) == 1 else "incomplete"
 
 
 def _set_aside(run_dir: Path) -> None:
     """Move an earlier, unsuccessful attempt's files to ``previous/<n>/``."""
-    leftovers = [p for p in run_dir.glob("*") if p.name not in (".hydra", "previous") and not p.name.endswith(".log")]
+    leftovers = [p for p in run_dir.glob("*") if p.name not in KEPT and not p.name.endswith(".log")]
     if not leftovers:
         return
     n = len(list((run_dir / "previous").glob("*"))) if (run_dir / "previous").exists() else 0

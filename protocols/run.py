@@ -7,6 +7,7 @@ point with the path of the run store: ``protocols`` never imports ``analysis``.
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from pathlib import Path
@@ -19,10 +20,11 @@ from tactile.frames import DEFAULT_VIEWS
 from tactile.geometry import load_taxels
 from tactile.pipeline import TactileModel
 
-from . import provenance
+from . import provenance, rundir
 from .calibration import session_baseline, store_baseline
 from .engine import FAILED, Outcome, RunEngine
-from .lab import make_lab
+from .interrupts import Interrupts
+from .lab import check_hardware, make_lab
 from .live import (LiveConfig, LiveMonitor, live_fingers, live_settings, open_viewer, tactile_config, terminal_display,
                    viewer_names, warm_up)
 from .plan import Plan, format_timeline, make_plan
@@ -31,10 +33,6 @@ from .steps import ProtocolError
 from .store import RunStore, utc_now
 
 ANALYSIS_ENTRY_POINTS = "tactile_flow.analysis"
-
-
-class RecordingError(RuntimeError):
-    """The run store could not be written to the end (e.g. a full disk)."""
 
 
 @dataclass
@@ -50,68 +48,99 @@ class RunResult:
     analysis: dict | None = None
 
 
-def run_protocol(cfg, run_dir, overrides=(), console=print) -> RunResult:
+def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrupts | None = None) -> RunResult:
     """Check the plan, then (unless ``cfg.plan_only``) run it on ``cfg.hardware``.
 
     Bad config or protocol raises ``ValueError`` (``ProtocolError``/``ConfigError``, naming
     the key) before any hardware is touched. A run that starts always ends with a closed
-    store and ``run.json``, whatever its status.
+    store and ``run.json``, whatever its status (if the disk allows: the result's error then
+    names ``tactile-recover``). The run directory is locked for the run (:mod:`.rundir`);
+    ``interrupts`` owns Ctrl-C and SIGTERM (installed here when not given).
     """
     run_dir = Path(run_dir)
     plan = make_plan(cfg)
     live, model = live_setup(cfg, plan, build=not cfg.plan_only)
     if cfg.plan_only:
+        check_hardware(cfg)
         console(format_timeline(plan))
         return RunResult("planned", run_dir, plan)
 
     lab = make_lab(cfg)
     baseline = session_baseline(cfg.hardware, lab)
     stage = getattr(lab, "stage", None)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    own = interrupts is None
+    interrupts = interrupts or Interrupts(console)
     store_path = run_dir / "run.zarr"
-    with lab:
+    with (interrupts.installed() if own else nullcontext()), rundir.locked(run_dir), lab:
         prov = provenance.collect(OmegaConf.to_yaml(cfg, resolve=True), list(overrides), lab.identities(),
                                   _calibration(lab), cfg.hardware.get("seed"), protocol=plan.protocol)
-        store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
-                                run_id=prov["run_id"], provenance=provenance.summary(prov),
-                                attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
-                                       "tare": bool(cfg.protocol.get("tare", True))},
-                                live=(live_fingers(live, lab.biotac.fingers), model.config.views) if model else None,
-                                stage=stage is not None)
-        viewer = open_viewer(live.viewer, live_fingers(live, lab.biotac.fingers), model, run_dir, console) if model \
-            else None
-        stored = store_baseline(store, baseline, lab.biotac.fingers)
-        if getattr(lab, "truth", None) is not None:
-            lab.truth.conditions = _conditions(cfg, lab, stored, plan)
-        sources = {"biotac": lab.biotac.read, "arm": lab.arm.read_states, "hand": lab.hand.read_states,
-                   "pump": lab.pump.read_states, "scale": lab.scale.read}
-        if stage is not None:
-            sources["stage"] = stage.read_states
-        recorder = Recorder(store, sources, lab.clock)
-        if not plan.setup:
-            recorder.start()
-        monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
-                              display=None if cfg.progress else terminal_display(), viewer=viewer) if model else None
-        outcome = Outcome(FAILED, "the run engine could not start")
-        try:
-            outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=_bars(cfg.progress), log=console,
-                                live=monitor).run(start_recording=recorder.start if plan.setup else None)
-        finally:
-            attrs = {"error": outcome.error}
-            if monitor is not None:
-                attrs["live"] = monitor.close()
-            truth = lab.truth.to_dict() if getattr(lab, "truth", None) is not None else None
+        with interrupts.during("writing"):          # from the store's creation to run.json: no signal raises
+            store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
+                                    run_id=prov["run_id"], provenance=provenance.summary(prov),
+                                    attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
+                                           "tare": bool(cfg.protocol.get("tare", True))},
+                                    live=(live_fingers(live, lab.biotac.fingers), model.config.views)
+                                    if model else None, stage=stage is not None)
+            stored = store_baseline(store, baseline, lab.biotac.fingers)
+            if getattr(lab, "truth", None) is not None:
+                lab.truth.conditions = _conditions(cfg, lab, stored, plan)
+            sources = {"biotac": lab.biotac.read, "arm": lab.arm.read_states, "hand": lab.hand.read_states,
+                       "pump": lab.pump.read_states, "scale": lab.scale.read}
+            if stage is not None:
+                sources["stage"] = stage.read_states
+            recorder = Recorder(store, sources, lab.clock)
+            monitor, outcome = None, Outcome(FAILED, "the run engine could not start")
             try:
-                stats = recorder.stop(outcome.status, truth=truth, attrs=attrs)
-            except Exception as exc:
-                cause = recorder.writer_error or exc
-                console(f"run {run_dir}: {outcome.status} ({outcome.error})")
-                raise RecordingError(f"the run store could not be closed ({type(cause).__name__}: {cause}); it "
-                                     f"keeps every sample committed before that; once the disk has room, run "
-                                     f"`tactile-recover {store_path}`") from exc
-            provenance.write_run_json(run_dir / "run.json", prov, status=outcome.status, end_time=utc_now(),
-                                      extra={"error": outcome.error, "store": store_path.name})
+                if not plan.setup:
+                    recorder.start()
+                if model:
+                    viewer = open_viewer(live.viewer, live_fingers(live, lab.biotac.fingers), model, run_dir, console)
+                    monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
+                                          display=None if cfg.progress else terminal_display(), viewer=viewer)
+                outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=_bars(cfg.progress), log=console,
+                                    live=monitor, interrupts=interrupts).run(
+                    start_recording=recorder.start if plan.setup else None)
+            except Exception as exc:              # the engine never raises past its safe stop; this is the rest
+                outcome = Outcome(FAILED, f"{type(exc).__name__}: {exc}")
+            finally:
+                outcome, stats = _close(run_dir, prov, recorder, monitor, lab, outcome)
     return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)
+
+
+def _close(run_dir: Path, prov: dict, recorder: Recorder, monitor, lab, outcome: Outcome) -> tuple[Outcome, dict]:
+    """Close the store and write ``run.json``. A store that could not record everything is
+    ``failed`` (never the engine's ``success``); what could not be written is said in the
+    error, with what to do. Returns the final outcome and the recorder's stream stats."""
+    attrs = {"error": outcome.error}
+    if monitor is not None:
+        try:
+            attrs["live"] = monitor.close()
+        except Exception as exc:                  # noqa: BLE001 - the store must still be closed
+            attrs["live_error"] = f"{type(exc).__name__}: {exc}"
+    truth = lab.truth.to_dict() if getattr(lab, "truth", None) is not None else None
+    status, error, stats = outcome.status, outcome.error, {}
+    store, problems = recorder.store, []
+    try:
+        stats = recorder.stop(status, truth=truth, attrs=attrs)
+    except Exception as exc:                      # noqa: BLE001 - a full disk, a vanished directory...
+        cause = recorder.writer_error or exc
+        problems.append(f"recording failed ({type(cause).__name__}: {cause}); the store keeps every sample "
+                        f"committed before that" + ("" if store.closed else " but could not be closed"))
+        status = FAILED
+    json_written = False
+    try:
+        provenance.write_run_json(run_dir / "run.json", prov, status=status, end_time=utc_now(),
+                                  extra={"error": "; ".join(problems) or error, "store": store.path.name})
+        json_written = True
+    except OSError as exc:
+        problems.append(f"run.json could not be written ({type(exc).__name__}: {exc})")
+        status = FAILED
+    if problems:
+        ended = f"the run itself ended {outcome.status}" + (f" ({outcome.error})" if outcome.error else "")
+        advice = [] if store.closed and json_written else [f"once the disk has room, run `tactile-recover "
+                                                           f"{store.path}` (it closes the store, writes run.json)"]
+        error = "; ".join([*problems, ended, *advice])
+    return Outcome(status, error, outcome.steps_done), stats
 
 
 def live_setup(cfg, plan: Plan, build: bool = True) -> tuple[LiveConfig, TactileModel | None]:

@@ -4,7 +4,8 @@
 every key of the composed config is checked against these dataclasses before anything
 runs: an unknown key or a value of the wrong type is a composition error naming the key.
 The ``hardware`` and ``surface`` groups are validated by their own schemas when the lab
-is built (:func:`protocols.lab.check_hardware`), also before anything moves.
+is built (:func:`protocols.lab.make_lab`; with ``plan_only``, :func:`protocols.lab.check_hardware`), before
+anything moves.
 
 Protocol units are the ones a researcher writes: mm, mm/s, mm/s², s, N, ml, ml/min, rad.
 They are converted to the robot's SI units (m, m/s) at the hardware boundary.
@@ -74,7 +75,7 @@ class RunConfig:
 
 
 # Classes a config may name with ``_target_`` (Hydra instantiates them); nothing else.
-ALLOWED_TARGETS = ("protocols.cli.SweepSummary",)
+ALLOWED_TARGETS = ("protocols.cli.SweepSummary", "protocols.cli.RunDirLock")
 
 
 def check_targets(node, key: str = "") -> None:

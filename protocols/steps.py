@@ -27,6 +27,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from hardware.errors import brief
+from hardware.hand import JOINT_NAMES
+
 
 class ProtocolError(ValueError):
     """A protocol that cannot run as written; ``key`` is the YAML key at fault."""
@@ -205,6 +208,10 @@ class Lift(Step):
 
 
 # ----------------------------------------------------------------------------- hand
+# The two distal flexion joints of each finger (J1 and J2 are coupled on the real hand).
+FLEX_JOINTS = {"ff": ("rh_FFJ2", "rh_FFJ3"), "mf": ("rh_MFJ2", "rh_MFJ3"), "rf": ("rh_RFJ2", "rh_RFJ3"),
+               "lf": ("rh_LFJ2", "rh_LFJ3"), "th": ("rh_THJ2", "rh_THJ5")}
+MAX_FLEXION = math.pi           # rad, a grasp's closure: two flexion joints of at most π/2 each
 
 
 @step
@@ -221,12 +228,16 @@ class Grasp(Step):
 
     def targets(self, ctx) -> dict[str, float]:
         if self.joints:
-            unknown = [j for j in self.joints if j not in ctx.joint_names]
+            unknown = [j for j in self.joints if j not in JOINT_NAMES]
             if unknown:
                 raise ProtocolError(f"{self.key}.joints", f"unknown joint(s) {unknown}; expected Shadow "
                                                           f"names such as rh_FFJ3")
             return dict(self.joints)
-        flexion = ctx.params.grasp_flexion if self.flexion is None else self.flexion
+        flexion, key = ((ctx.params.grasp_flexion, "protocol.grasp_flexion") if self.flexion is None
+                        else (self.flexion, f"{self.key}.flexion"))
+        if isinstance(flexion, bool) or not isinstance(flexion, (int, float)) or not 0 < flexion <= MAX_FLEXION:
+            raise ProtocolError(key, f"expected a closure in (0, {MAX_FLEXION:.4g}] rad (two joints of at most "
+                                     f"π/2 each), got {brief(flexion)}")
         targets = {}
         for i, f in enumerate(self.fingers):
             if f not in FLEX_JOINTS:
@@ -235,7 +246,8 @@ class Grasp(Step):
         return targets
 
     def plan(self, ctx):
-        self.targets(ctx)
+        _positive(self.duration, f"{self.key}.duration")
+        ctx.hand(self.targets(ctx), self.duration, self.key)
         return _still(ctx, self.duration, f"{self.key}.duration")
 
     def run(self, ctx):
@@ -250,13 +262,16 @@ class Release(Step):
 
     kind: ClassVar[str] = "release"
     duration: float = 1.0
+    OPEN: ClassVar[dict] = {j: 0.0 for joints in FLEX_JOINTS.values() for j in joints}
 
     def plan(self, ctx):
+        _positive(self.duration, f"{self.key}.duration")
+        ctx.hand(self.OPEN, self.duration, self.key)
         return _still(ctx, self.duration, f"{self.key}.duration")
 
     def run(self, ctx):
         ctx.lab.pump.stop()
-        ctx.hand_move({j: 0.0 for joints in FLEX_JOINTS.values() for j in joints}, self.duration)
+        ctx.hand_move(dict(self.OPEN), self.duration)
         ctx.wait(self.duration)
 
 
@@ -295,17 +310,15 @@ class Tighten(Reaction):
             out.update({j: ctx.hand_targets.get(j, 0.0) + self.flexion / 2 for j in FLEX_JOINTS[f]})
         return out
 
-    def check(self, ctx) -> None:
+    def check(self, ctx, commit: bool = False) -> None:
         if not (0 < self.flexion <= MAX_TIGHTEN):
             raise ProtocolError(f"{self.key}.flexion", f"expected an increment in (0, {MAX_TIGHTEN}] rad, "
-                                                       f"got {self.flexion}")
+                                                       f"got {brief(self.flexion)}")
         _positive(self.duration, f"{self.key}.duration")
-        for i, f in enumerate(self.fingers):
-            if f not in FLEX_JOINTS:
-                raise ProtocolError(f"{self.key}.fingers[{i}]", f"expected one of {list(FLEX_JOINTS)}, got {f!r}")
+        ctx.hand(self.targets(ctx), self.duration, self.key, commit=commit)
 
     def plan(self, ctx):
-        self.check(ctx)
+        self.check(ctx, commit=True)
         return _still(ctx, self.duration, f"{self.key}.duration")
 
     def run(self, ctx):
@@ -350,9 +363,6 @@ def _check_reactions(ctx, on_slip, key: str) -> None:
         r.check(ctx)
 
 
-# The two distal flexion joints of each finger (J1 and J2 are coupled on the real hand).
-FLEX_JOINTS = {"ff": ("rh_FFJ2", "rh_FFJ3"), "mf": ("rh_MFJ2", "rh_MFJ3"), "rf": ("rh_RFJ2", "rh_RFJ3"),
-               "lf": ("rh_LFJ2", "rh_LFJ3"), "th": ("rh_THJ2", "rh_THJ5")}
 
 
 # ----------------------------------------------------------------------------- pour and waiting
@@ -385,6 +395,10 @@ class Pour(Step):
                                                     f"hardware.pump.max_rate_ml_min={ctx.limits.max_pump_rate}")
         ctx.check_criterion(self.until, f"{self.key}.until")
         _check_reactions(ctx, self.on_slip, f"{self.key}.on_slip")
+        if not volume / rate * 60.0 <= ctx.max_duration:         # the pump is told how long to run
+            raise ProtocolError(f"{self.key}.volume", f"{brief(volume)} ml at {brief(rate)} ml/min would pour for "
+                                                      f"{brief(volume / rate * 60.0)} s, longer than "
+                                                      f"safety.max_duration_s={ctx.max_duration:g} s")
         ctx.pour_until = ctx.time + volume / rate * 60.0
         return _still(ctx, volume / rate * 60.0, f"{self.key}.volume") if self.waits else ([], 0.0)
 
@@ -466,7 +480,7 @@ def _still(ctx, seconds, key: str) -> tuple[list, float]:
 
 def _positive(value, key: str) -> None:
     if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-        raise ProtocolError(key, f"expected a number > 0, got {value!r}")
+        raise ProtocolError(key, f"expected a number > 0, got {brief(value)}")
 
 
 # ----------------------------------------------------------------------------- parsing

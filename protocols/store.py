@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import asyncio
 import math
+import os
+import shutil
 import threading
 import uuid
 import warnings
@@ -245,37 +247,33 @@ class RunStore:
         root attributes (``run_id``, ``protocol``, ``status="running"``, ``start_time``,
         ``schema_version``, ``provenance``) and commit it. ``live``: ``(fingers, views)``
         of the online tactile flow, to add the ``live`` group; ``stage``: add the object
-        stage's ``stage`` group."""
+        stage's ``stage`` group.
+
+        Atomic: everything is made in a hidden directory beside ``path`` and renamed into
+        place, so an interrupted creation leaves no half-made store (at most the hidden
+        ``.<name>.creating-*`` directory, which :func:`remove_debris` clears)."""
         path = Path(path)
         if path.exists():
             raise FileExistsError(f"run store {path} already exists")
         fingers = tuple(fingers)
         schema = run_schema(chunk_s, live=bool(live), stage=stage)
-        sizes = {"finger": len(fingers), "taxel": N_TAXELS, "axis6": 6, "joint": len(JOINT_NAMES),
-                 "stage_axis": len(STAGE_AXES)}
-        if live:
-            sizes.update(live_finger=len(live[0]), view=len(live[1]))
-        root = zarr.open_group(str(path), mode="w-", zarr_format=3)
-        coords = _coords(fingers, live)
-        for group in dict.fromkeys(b.group for b in schema.values()):
-            g = root.create_group(group)
-            for name, (values, units, long_name) in coords.get(group, {}).items():
-                a = g.create_array(name, shape=values.shape, dtype=str if values.dtype.kind == "U" else values.dtype,
-                                   dimension_names=[name], attributes={"units": units, "long_name": long_name})
-                a[:] = values
-        for blk in schema.values():
-            g = root[blk.group]
-            for v in blk.vars:
-                shape = (0, *(sizes[d] for d in v.dims[1:]))
-                g.create_array(v.name, shape=shape, chunks=(blk.chunk, *shape[1:]), dtype=_zarr_dtype(v.dtype),
-                               fill_value=_fill(v.dtype), dimension_names=list(v.dims),
-                               attributes={"units": v.units, "long_name": v.long_name})
-        store = cls(path, root, schema, fingers)
         prov = provenance or {}
-        store.set_attrs(run_id=run_id or prov.get("run_id") or str(uuid.uuid4()), protocol=protocol,
-                        status="running", start_time=prov.get("start_time") or utc_now(), end_time=None,
-                        schema_version=SCHEMA_VERSION, fingers=list(fingers), provenance=prov, **(attrs or {}))
-        store.commit()
+        root_attrs = jsonable(dict(run_id=run_id or prov.get("run_id") or str(uuid.uuid4()), protocol=protocol,
+                                   status="running", start_time=prov.get("start_time") or utc_now(), end_time=None,
+                                   schema_version=SCHEMA_VERSION, fingers=list(fingers), provenance=prov,
+                                   **(attrs or {})))
+        tmp = path.with_name(f".{path.name}.creating-{uuid.uuid4().hex[:8]}")
+        try:
+            _make_tree(tmp, schema, fingers, live, root_attrs)
+            if path.exists():
+                raise FileExistsError(f"run store {path} already exists")
+            os.rename(tmp, path)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        store = cls(path, zarr.open_group(str(path), mode="r+", use_consolidated=False), schema, fingers)
+        store._attrs = dict(root_attrs)
+        store.n_commits = 1
         return store
 
     # ---------------------------------------------------------------- writing
@@ -440,6 +438,43 @@ class RunStore:
             self.set_attrs(status=status, end_time=utc_now(), **attrs)
             self.commit()
             self.closed = True
+
+
+def _make_tree(path: Path, schema: dict[str, Block], fingers: tuple[str, ...], live, attrs: dict) -> None:
+    """Every group, coordinate and empty variable of a new store at ``path``, with the root
+    ``attrs``, consolidated (the first commit)."""
+    sizes = {"finger": len(fingers), "taxel": N_TAXELS, "axis6": 6, "joint": len(JOINT_NAMES),
+             "stage_axis": len(STAGE_AXES)}
+    if live:
+        sizes.update(live_finger=len(live[0]), view=len(live[1]))
+    root = zarr.open_group(str(path), mode="w-", zarr_format=3)
+    coords = _coords(fingers, live)
+    for group in dict.fromkeys(b.group for b in schema.values()):
+        g = root.create_group(group)
+        for name, (values, units, long_name) in coords.get(group, {}).items():
+            a = g.create_array(name, shape=values.shape, dtype=str if values.dtype.kind == "U" else values.dtype,
+                               dimension_names=[name], attributes={"units": units, "long_name": long_name})
+            a[:] = values
+    for blk in schema.values():
+        g = root[blk.group]
+        for v in blk.vars:
+            shape = (0, *(sizes[d] for d in v.dims[1:]))
+            g.create_array(v.name, shape=shape, chunks=(blk.chunk, *shape[1:]), dtype=_zarr_dtype(v.dtype),
+                           fill_value=_fill(v.dtype), dimension_names=list(v.dims),
+                           attributes={"units": v.units, "long_name": v.long_name})
+    root.update_attributes(attrs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")     # "consolidated metadata not in the v3 spec"
+        zarr.consolidate_metadata(str(path))
+
+
+def remove_debris(directory) -> list[Path]:
+    """Remove the hidden ``.*.creating-*`` directories that an interrupted :meth:`RunStore.create`
+    left in ``directory``; returns them."""
+    found = sorted(Path(directory).glob(".*.creating-*"))
+    for p in found:
+        shutil.rmtree(p, ignore_errors=True)
+    return found
 
 
 async def _append_arrays(items) -> None:

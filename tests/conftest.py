@@ -1,5 +1,10 @@
+from pathlib import Path
+
 import numpy as np
 import pytest
+
+#: the real recordings the tests read (shipped with the project; attribution in DATA / "README.md")
+DATA = Path(__file__).resolve().parent / "data"
 
 
 @pytest.fixture(scope="session")
@@ -33,6 +38,9 @@ class EventLog:
 
     def write_failure(self, max_age_s):
         return None
+
+    def keep_up(self):
+        pass
 
     def kinds(self):
         return [k for k, _, _ in self.events]

@@ -81,13 +81,56 @@ def small_disk(tmp_path):
     subprocess.run(["umount", "-l", str(mount)], capture_output=True)
 
 
+@pytest.mark.slow
 def test_a_full_disk_stops_the_run_and_keeps_what_was_committed(tmp_path, small_disk):
     proc = subprocess.run([*CLI, "protocol=pour_grasp", f"hydra.run.dir={small_disk}/run"], cwd=tmp_path,
                           capture_output=True, text=True, timeout=300)
-    assert proc.returncode != 0
-    assert "No space left on device" in proc.stderr and "interlock recording_failed" in proc.stdout
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr
+    (line,) = [x for x in proc.stdout.splitlines() if x.startswith("run ")]
+    assert ": failed (recording failed" in line and "No space left on device" in line
+    assert "interlock recording_failed" in line and "tactile-recover" in line
     store = small_disk / "run" / "run.zarr"
     tree = xr.open_datatree(store, engine="zarr")             # what was committed opens
     seq = tree["biotac"]["seq"].values
     assert len(seq) > 100 and np.all(np.diff(seq) == 1) and seq[0] == 1
+    assert tree.attrs["status"] == "running"                  # it could not even be closed: recovery's job
+
+    # tactile-recover on the still-full disk: one line, exit 1, nothing lost; with room, it closes the run
+    from protocols.recover import main as recover_main
+    rec = subprocess.run([sys.executable, "-c", "from protocols.recover import main; import sys; sys.exit(main())",
+                          str(store)], capture_output=True, text=True, timeout=120)
+    assert rec.returncode == 1 and "Traceback" not in rec.stderr and len(rec.stderr.strip().splitlines()) == 1
+    assert "could not be written" in rec.stderr and "nothing was lost" in rec.stderr
+    subprocess.run(["mount", "-o", "remount,size=8m", str(small_disk)], check=True)     # the disk has room
+    assert recover_main([str(store)]) == 0
+    tree = xr.open_datatree(store, engine="zarr")
+    assert tree.attrs["status"] == "crashed" and len(tree["biotac"]["seq"]) == len(seq)
+    assert json.loads((store.parent / "run.json").read_text())["status"] == "crashed"
     os.statvfs(small_disk)                                     # the mount is still usable for cleanup
+
+
+@pytest.fixture
+def tiny_disk(tmp_path):
+    mount = tmp_path / "tiny"
+    mount.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(mount)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("needs root to mount a small tmpfs")
+    yield mount
+    subprocess.run(["umount", "-l", str(mount)], capture_output=True)
+
+
+@pytest.mark.slow
+def test_a_run_that_could_not_record_is_never_a_success(tmp_path, tiny_disk):
+    """Issue 13 item 6: a disk full from the start (1 MB) closed the store ``success`` with 0 frames."""
+    proc = subprocess.run([*CLI, f"hydra.run.dir={tiny_disk}/run"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert "success" not in proc.stdout and ": failed (recording failed" in proc.stdout, proc.stdout
+    tree = xr.open_datatree(tiny_disk / "run" / "run.zarr", engine="zarr")
+    run_json = tiny_disk / "run" / "run.json"
+    if tree.attrs["status"] == "running":               # the disk did not even take the close: recovery's job
+        assert "tactile-recover" in proc.stdout
+    else:
+        assert tree.attrs["status"] == "failed" and "No space left on device" in tree.attrs["recorder_error"]
+    assert not run_json.exists() or json.loads(run_json.read_text())["status"] == "failed"

@@ -11,9 +11,10 @@ from omegaconf import OmegaConf
 from protocols.importers import ImportInputError, ImportSettings, import_source
 from protocols.importers import writer as writer_mod
 from protocols.importers.cli import BAD_INPUT, FAILED, run
+from conftest import DATA
 
 CONF = Path(__file__).resolve().parents[1] / "conf" / "import.yaml"
-BAG = Path("/work/shared/data/biotac_rest_untouched.bag")
+BAG = DATA / "biotac_rest_untouched.bag"
 
 
 def electrode_csv(path: Path, n=50, prefix="", time=None, extra=(), drop=()) -> Path:
@@ -99,13 +100,13 @@ def test_csv_missing_rate(tmp_path):
     assert "positive" in one_line_error(tmp_path, src, rate_hz=-3)
 
 
-def test_directory_with_one_bad_file_writes_nothing(tmp_path):
+def test_directory_whose_every_file_is_bad_writes_nothing(tmp_path):
     d = tmp_path / "session"
     d.mkdir()
-    electrode_csv(d / "a.csv")
+    electrode_csv(d / "a.csv", drop=("e3",))
     electrode_csv(d / "b.csv", extra=("oops",))
     msg = one_line_error(tmp_path, d, rate_hz=100)
-    assert "b.csv" in msg and "oops" in msg
+    assert "no file could be imported" in msg and "a.csv" in msg and "b.csv" in msg and "oops" in msg
 
 
 def test_calibration_without_a_finger(tmp_path):
@@ -173,7 +174,6 @@ def test_cli_process_nonexistent_source(tmp_path):
     assert list(tmp_path.iterdir()) == []                           # no log file, no output directory
 
 
-@pytest.mark.skipif(not BAG.exists(), reason="the real resting bag is not available")
 def test_cli_process_imports_the_real_bag(tmp_path):
     r = subprocess.run([sys.executable, "-m", "protocols.importers.cli", f"source={BAG}", "out=imp"],
                        cwd=tmp_path, capture_output=True, text=True, timeout=60)

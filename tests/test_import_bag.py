@@ -10,11 +10,10 @@ import xarray as xr
 
 from protocols.importers import ImportSettings, import_source, read_bag
 from protocols.importers.bag import MSGTYPE, biotac_typestore
+from analysis.run import analyze_run
+from conftest import DATA
 
-BAG = Path(__file__).resolve().parents[2] / "shared" / "data" / "biotac_rest_untouched.bag"
-if not BAG.exists():
-    BAG = Path("/work/shared/data/biotac_rest_untouched.bag")
-pytestmark = pytest.mark.skipif(not BAG.exists(), reason="the real resting bag is not available")
+BAG = DATA / "biotac_rest_untouched.bag"
 
 
 @pytest.fixture(scope="module")
@@ -76,8 +75,7 @@ def test_real_bag_provenance_names_source_and_checksum(imported):
 
 
 def test_real_resting_recording_analyses_to_no_contact(imported, tmp_path):
-    analysis_run = pytest.importorskip("analysis.run")
-    summary = analysis_run.analyze_run(imported.store, {"progress": False, "figures": False},
+    summary = analyze_run(imported.store, {"progress": False, "figures": False},
                                        console=lambda *a: None)
     assert summary["run_status"] == "success" and summary["protocol"] == "import"
     assert summary["headline"]["status"] == "no_contact"

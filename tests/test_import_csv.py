@@ -10,9 +10,10 @@ import xarray as xr
 
 from protocols.importers import ImportSettings, import_source, read_bag, select_fingers
 from tactile.signals import SensorCalibration
+from analysis.run import analyze_run
+from conftest import DATA
 
-BAG = Path("/work/shared/data/biotac_rest_untouched.bag")
-pytestmark = pytest.mark.skipif(not BAG.exists(), reason="the real resting bag is not available")
+BAG = DATA / "biotac_rest_untouched.bag"
 
 
 @pytest.fixture(scope="module")
@@ -81,10 +82,9 @@ def test_electrode_only_file_with_rate(rest, tmp_path):
 
 
 def test_electrode_only_file_analyses(rest, tmp_path):
-    analysis_run = pytest.importorskip("analysis.run")
     src = write_csv(tmp_path / "ff.csv", rest, fingers=["ff"], prefixed=False, channels=())
     (res,) = import_source(src, tmp_path / "out", ImportSettings(rate_hz=100))
-    s = analysis_run.analyze_run(res.store, {"progress": False, "figures": False}, console=lambda *a: None)
+    s = analyze_run(res.store, {"progress": False, "figures": False}, console=lambda *a: None)
     assert s["provenance"]["pressure_signal"] == "proxy"                # no pdc stored → electrode proxy
     assert s["headline"]["status"] == "no_contact"
 

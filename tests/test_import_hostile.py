@@ -23,10 +23,10 @@ from protocols.importers import importer as importer_mod
 from protocols.importers.bag import BIOTAC_MSGS, MSGTYPE, TOPIC
 from protocols.importers.cli import BAD_INPUT, run
 from protocols.importers.recording import median_of, order_statistics
+from conftest import DATA
 
-BAG = Path("/work/shared/data/biotac_rest_untouched.bag")
+BAG = DATA / "biotac_rest_untouched.bag"
 CONF = Path(__file__).resolve().parents[1] / "conf" / "import.yaml"
-needs_bag = pytest.mark.skipif(not BAG.exists(), reason="the real resting bag is not available")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -109,7 +109,6 @@ def write_bag(path: Path, n: int, compression: str | None = None, chunk_bytes: i
 
 
 # ----------------------------------------------------------------------------- truncated bags
-@needs_bag
 def test_bag_cut_inside_its_chunk_imports_every_complete_message(tmp_path):
     full = read_bag(BAG)
     src = cut_bag(tmp_path, 200_000)
@@ -129,7 +128,6 @@ def test_bag_cut_inside_its_chunk_imports_every_complete_message(tmp_path):
     assert dt.attrs["import"]["frames"] == n and dt.attrs["status"] == "success"
 
 
-@needs_bag
 @pytest.mark.parametrize("nbytes, ends", [(378_000, "inside the index data of chunk 1"),
                                           (390_000, "inside the bag index")])
 def test_bag_cut_in_its_index_loses_nothing(tmp_path, nbytes, ends):
@@ -142,7 +140,6 @@ def test_bag_cut_in_its_index_loses_nothing(tmp_path, nbytes, ends):
     assert t["ends"] == ends and t["messages_lost"].startswith("none")
 
 
-@needs_bag
 def test_bag_never_closed_is_read_to_its_last_chunk(tmp_path):
     """What a killed ``rosbag record`` leaves: index_pos = 0 in the header, no index."""
     data = bytearray(BAG.read_bytes())
@@ -173,7 +170,6 @@ def test_compressed_bag_cut_mid_chunk(tmp_path, compression):
     assert dt.attrs["import"]["reader"]["truncated"]["ends"].startswith("inside chunk")
 
 
-@needs_bag
 def test_bag_cut_before_any_message_is_refused(tmp_path):
     src = cut_bag(tmp_path, 4200)
     msg = refused(tmp_path, src)
@@ -181,7 +177,6 @@ def test_bag_cut_before_any_message_is_refused(tmp_path):
     assert "cannot be read as a ROS bag (truncated" in refused(tmp_path, cut_bag(tmp_path, 2000, "tiny"))
 
 
-@needs_bag
 @pytest.mark.parametrize("field, expected", [("record length", "corrupt ROS bag at byte 4117 (a record inside a chunk "
                                                                "runs past the chunk)"),
                                              ("electrode count", "corrupt ROS bag: message 300 of /rh/tactile cannot "
@@ -198,7 +193,6 @@ def test_corrupt_bag_is_refused(tmp_path, field, expected):
     assert expected in refused(tmp_path, src)
 
 
-@needs_bag
 def test_cli_truncated_bags(tmp_path):
     cut_bag(tmp_path, 200_000, "half")
     r = cli(tmp_path, "source=half.bag", "out=imp")

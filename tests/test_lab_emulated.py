@@ -144,3 +144,25 @@ def test_unreachable_rosbridge_fails_fast_and_leaves_nothing_half_written(emulat
         run_protocol(cfg, tmp_path / "run", console=lambda *a: None)
     assert time.monotonic() - t0 < 10
     assert not (tmp_path / "run" / "run.zarr").exists() and not (tmp_path / "run" / "run.json").exists()
+
+
+TIME_AXES = {"biotac": "time", "biotac_pac": "time_pac", "arm": "time_arm", "hand": "time_hand",
+             "pour": ("time_pump", "time_scale")}
+
+
+@pytest.mark.slow
+def test_every_time_axis_of_an_emulated_run_is_strictly_increasing(emulated_lab, tmp_path):
+    """Issue 13 item 12: PAC times went back at frame boundaries (a frame's 22 samples span
+    10 ms; frame stamps jitter, frames came closer) and the scale repeated a time (lines read
+    together shared one receipt time)."""
+    cfg = _cfg("hardware=lab_emulated", "protocol=pour_grasp", "protocol.steps.3.hold.duration=3",
+               *emulated_lab, *FAST)
+    result = run_protocol(cfg, tmp_path / "lab", console=lambda *a: None)
+    assert result.status == "success", result.error
+    tree = xr.open_datatree(result.store, engine="zarr")
+    for group, axes in TIME_AXES.items():
+        for axis in (axes,) if isinstance(axes, str) else axes:
+            t = tree[group][axis].values
+            steps = np.diff(t)
+            assert len(t) > 10 and np.all(steps > 0), (f"{group}/{axis}: {int(np.sum(steps <= 0))} of {len(t)} "
+                                                        f"steps not increasing, worst {steps.min():.4g} s")

@@ -16,6 +16,7 @@ from protocols.plan import make_plan
 from protocols.run import live_setup, run_protocol
 from protocols.schema import register
 from protocols.steps import Criterion, ProtocolError
+from conftest import DATA
 
 register()
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
@@ -156,7 +157,7 @@ def test_the_plain_pour_records_no_live_group(pours):
 
 # ----------------------------------------------------------------------------- false alarms
 
-BAG = Path("/work/shared/data/biotac_rest_untouched.bag")
+BAG = DATA / "biotac_rest_untouched.bag"
 
 
 def test_no_false_alarm_on_the_resting_recording(model):

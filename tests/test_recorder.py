@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from hardware.biotac import BiotacFrame
+from hardware.device import WallClock
 from hardware.sim import make_sim_lab
 from hardware.sim.scenarios import pad_height_pose
 from protocols.clockmodel import (OnlineClockModel, fit_envelope, sequence_gaps, window_minima)
@@ -264,3 +266,40 @@ def test_sigkill_leaves_a_consistent_store_missing_at_most_one_second(tmp_path):
         for name, var in ds.variables.items():                             # data actually readable
             assert np.asarray(var.values).shape == var.shape
     assert dt["arm"].sizes["time_arm"] > 0 and "step_start" in list(dt["events/kind"].values)
+
+
+class JitteryBridge:
+    """A BioTac bridge on the wall clock whose frames come with 22 PAC samples each and
+    whose transport latency drops from 30 ms to 1 ms after 1.2 s (a congested link clearing):
+    the online clock model then refits to an earlier offset mid-run, and frames now and then
+    arrive 8 ms closer than their samples span (stamp jitter)."""
+
+    def __init__(self):
+        self.t0, self.seq = time.monotonic(), 0
+
+    def read(self):
+        frames, now = [], time.monotonic() - self.t0
+        while (self.seq + 1) * 0.01 <= now:
+            self.seq += 1
+            t = self.seq * 0.01 - (0.008 if self.seq % 7 == 0 else 0.0)
+            latency = 0.03 if t < 1.2 else 0.001
+            frames.append(BiotacFrame(self.seq, 500.0 + t, self.t0 + t + latency, np.full((1, 24), 2000, np.int16),
+                                      np.array([2000]), np.array([2000]), np.array([0]), np.zeros((1, 22), np.int16)))
+        return frames
+
+
+@pytest.mark.slow
+def test_time_axes_increase_strictly_while_recording_and_after(tmp_path):
+    """Issue 13 item 12, the recorder's part: committed times (what a reader, or a killed
+    run, keeps) never go back across a flush when the clock model refits, nor at a frame
+    boundary of the PAC samples; the final refit keeps them increasing."""
+    store = RunStore.create(tmp_path / "run.zarr", protocol="jitter", fingers=("ff",))
+    rec = Recorder(store, {"biotac": JitteryBridge().read}, WallClock(), flush_interval_s=0.2).start()
+    time.sleep(3.0)
+    mid = xr.open_datatree(store.path, engine="zarr")
+    rec.stop("success")
+    end = open_run(store.path)
+    for tree in (mid, end):
+        for group, axis in (("biotac", "time"), ("biotac_pac", "time_pac")):
+            steps = np.diff(tree[group][axis].values)
+            assert len(steps) > 100 and np.all(steps > 0), (group, axis, steps.min())

@@ -1,7 +1,10 @@
 """Pump (EZO-PMP-like) and scale (A&D-like) drivers through pyserial against the emulators on ptys."""
 
+import os
+import threading
 import time
 
+import numpy as np
 import pytest
 
 from hardware.emulators.serial_devices import SerialDevicesEmulator
@@ -127,3 +130,28 @@ def test_disconnect_of_pump_and_scale_is_detected():
         assert time.monotonic() - t0 < 0.5
         pump.close()
         scale.close()
+
+
+def test_weight_lines_read_together_get_strictly_increasing_times():
+    """Issue 13 item 12: lines that reach the host in one read shared one receipt time, so
+    ``pour/time_scale`` repeated a time. A real pty; five lines written at once."""
+    master, slave = os.openpty()
+    scale = SerialScale(SerialScaleConfig(port=os.ttyname(slave), rate_hz=10.0))
+    line = format_weight_line(99.0, True, False).encode() + b"\r\n"
+    try:
+        writer = threading.Timer(0.2, os.write, (master, line))
+        writer.start()
+        scale.connect()                                   # waits for the first line
+        scale.read()
+        os.write(master, b"".join(format_weight_line(100.0 + i, True, False).encode() + b"\r\n" for i in range(5)))
+        got, deadline = [], time.monotonic() + 5
+        while len(got) < 5 and time.monotonic() < deadline:
+            got += scale.read()
+            time.sleep(0.05)
+    finally:
+        scale.close()
+        os.close(master)
+        os.close(slave)
+    t = np.array([r.device_time for r in got])
+    assert [r.mass_g for r in got] == [100.0, 101.0, 102.0, 103.0, 104.0]
+    assert np.all(np.diff(t) > 0) and np.all(np.diff(t) <= 0.1 + 1e-9), t      # at most the line period apart

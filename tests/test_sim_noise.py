@@ -1,24 +1,21 @@
-"""Resting sensors look like the real recording (../shared/data/biotac_rest_untouched.bag)."""
-
-from pathlib import Path
+"""Resting sensors look like the real recording (tests/data/biotac_rest_untouched.bag)."""
 
 import numpy as np
 import pytest
+from rosbags.highlevel import AnyReader
 
+from conftest import DATA
 from hardware.sim import make_sim_lab
 from hardware.sim.scenarios import biotac_arrays
 
-BAG = Path("/work/shared/data/biotac_rest_untouched.bag")
+BAG = DATA / "biotac_rest_untouched.bag"
 CONNECTED = {"ff": 0, "mf": 1, "th": 4}          # the bag's connected fingers (Shadow index)
 
 
 @pytest.fixture(scope="module")
 def real():
-    rosbags = pytest.importorskip("rosbags.highlevel")
-    if not BAG.exists():
-        pytest.skip(f"{BAG} not available")
     e, pdc, pac = [], [], []
-    with rosbags.AnyReader([BAG]) as r:
+    with AnyReader([BAG]) as r:
         conns = [c for c in r.connections if c.topic == "/rh/tactile"]
         for c, _, raw in r.messages(connections=conns):
             m = r.deserialize(raw, c.msgtype)

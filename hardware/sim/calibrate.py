@@ -2,7 +2,7 @@
 
 Run once (needs the ``rosbags`` package; the simulator itself does not)::
 
-    python -m hardware.sim.calibrate /work/shared/data/biotac_rest_untouched.bag \
+    python -m hardware.sim.calibrate tests/data/biotac_rest_untouched.bag \
         hardware/sim/biotac_rest_calibration.json
 
 For every connected sensor (disconnected ones read pdc = -22072 and are skipped) it

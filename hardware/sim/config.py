@@ -15,9 +15,13 @@ from dataclasses import dataclass, field
 from typing import Any, Optional
 
 from ..biotac import FINGERS, check_fingers
-from ..errors import ConfigError
+from ..errors import BUFFER_RANGE_S, RATE_RANGE_HZ, ConfigError, brief, require_within
 
 DEVICES = ("arm", "hand", "biotac", "pump", "scale", "stage")
+#: the world step (s): the arm controller's period is 2 ms; much finer makes a run crawl,
+#: coarser no longer resolves a contact
+STEP_RANGE_S = (1e-4, 0.01)
+SEED_MAX = 2**63 - 1
 
 
 def _default_fingertips() -> dict[str, list[float]]:
@@ -252,10 +256,11 @@ def _coerce(tp, v, key):
             raise ConfigError(key, f"expected true or false, got {v!r}")
         return v
     if tp in (int, float):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or (tp is int and not float(v).is_integer()):
-            raise ConfigError(key, f"expected a number ({tp.__name__}), got {v!r}")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (
+                tp is int and isinstance(v, float) and not v.is_integer()):
+            raise ConfigError(key, f"expected a number ({tp.__name__}), got {brief(v)}")
         if not math.isfinite(v):
-            raise ConfigError(key, f"expected a finite number, got {v!r}")
+            raise ConfigError(key, f"expected a finite number, got {brief(v)}")
         return tp(v)
     if tp is str:
         if not isinstance(v, str):
@@ -268,14 +273,14 @@ def _positive(obj, key, names):
     for n in names:
         v = getattr(obj, n)
         if not v > 0:
-            raise ConfigError(f"{key}.{n}", f"expected a value > 0, got {v!r}")
+            raise ConfigError(f"{key}.{n}", f"expected a value > 0, got {brief(v)}")
 
 
 def _nonneg(obj, key, names):
     for n in names:
         v = getattr(obj, n)
         if v < 0:
-            raise ConfigError(f"{key}.{n}", f"expected a value >= 0, got {v!r}")
+            raise ConfigError(f"{key}.{n}", f"expected a value >= 0, got {brief(v)}")
 
 
 def validate(cfg: SimConfig, key: str = "hardware") -> SimConfig:
@@ -283,7 +288,13 @@ def validate(cfg: SimConfig, key: str = "hardware") -> SimConfig:
     if cfg.backend != "sim":
         raise ConfigError(f"{key}.backend", f"expected 'sim', got {cfg.backend!r}")
     cfg.fingers = list(check_fingers(cfg.fingers, f"{key}.fingers"))
-    _positive(cfg, key, ["step_s", "biotac_rate_hz", "hand_rate_hz", "buffer_s"])
+    if not 0 <= cfg.seed <= SEED_MAX:
+        raise ConfigError(f"{key}.seed", f"expected a whole number in [0, 2**63 - 1], got {brief(cfg.seed)}")
+    require_within(cfg, ["step_s"], STEP_RANGE_S, "s", key)
+    require_within(cfg, ["biotac_rate_hz", "hand_rate_hz"], RATE_RANGE_HZ, "Hz", key)
+    require_within(cfg.pump, ["rate_hz"], RATE_RANGE_HZ, "Hz", f"{key}.pump")
+    require_within(cfg.scale, ["rate_hz"], RATE_RANGE_HZ, "Hz", f"{key}.scale")
+    require_within(cfg, ["buffer_s"], BUFFER_RANGE_S, "s", key)
     for n in ("biotac_rate_hz", "hand_rate_hz"):
         ticks = 1.0 / (getattr(cfg, n) * cfg.step_s)
         if abs(ticks - round(ticks)) > 1e-9 or round(ticks) < 1:

@@ -5,7 +5,8 @@
     tactile-import source=press.csv calibration=cal.json fingers=[mf]
 
 Exit status: 0 imported, 2 bad input (one line on stderr naming the file and, for a CSV, the
-line and column; nothing written), 1 other failure. A truncated bag imports what it holds
+line and column; nothing written; for a directory: the good files are imported and every
+bad one gets its line), 1 other failure. A truncated bag imports what it holds
 (exit 0) and its output line ends with ``WARNING: truncated bag: ...``. Files are streamed:
 memory does not grow with their length (``docs/import.md``). ``verbose=true`` adds the
 traceback. The work is :func:`protocols.importers.import_source`.
@@ -21,7 +22,9 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import OmegaConf
 
-from .importer import ImportSettings, import_source
+from protocols.app import run_app
+
+from .importer import ImportIncomplete, ImportSettings, import_source
 from .recording import ImportInputError
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
@@ -47,6 +50,12 @@ def run(cfg, overrides=(), console=print) -> int:
     try:
         import_source(cfg.source, cfg.out, settings_from(cfg), config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
                       overrides=overrides, console=console)
+    except ImportIncomplete as exc:                 # the good files are imported; one line per bad one
+        for _, reason in exc.failures:
+            print(f"import error: {reason}", file=sys.stderr)
+        print(f"import: {len(exc.results)} of {len(exc.results) + len(exc.failures)} files imported",
+              file=sys.stderr)
+        return BAD_INPUT
     except (ImportInputError, FileExistsError, ValueError) as exc:
         _report(cfg, exc, "import error")
         return BAD_INPUT
@@ -68,7 +77,7 @@ def _app(cfg) -> None:
 
 
 def main() -> None:
-    _app()
+    run_app(_app)                   # a config file is data: one line for a bad one, exit 2
     sys.exit(_exit["code"])
 
 

@@ -34,6 +34,8 @@ import numpy as np
 
 from hardware.biotac import FINGERS, N_TAXELS
 
+from hardware.errors import brief
+
 from .recording import CHUNK_FRAMES, ImportInputError, Recording, check_rate, concat, parse_rate
 
 CHANNELS = ("pdc", "tdc", "tac")
@@ -237,6 +239,32 @@ def check_increasing(t: np.ndarray, previous: float | None, first_line: int, whe
                                f"on the line before ({full[j]:g} s); the time column must be strictly increasing")
 
 
+#: the largest step of a ``time`` column (s): a recording does not pause for an hour; a step
+#: longer than that is a broken clock or a corrupt cell, and the file is refused
+MAX_TIME_STEP_S = 3600.0
+#: a step this many times the chunk's median step is a gap: kept, and said (``import.reader.time_gaps``,
+#: a warning on the output line)
+GAP_FACTOR = 10.0
+
+
+def check_steps(t: np.ndarray, previous: float | None, first_line: int, where: str) -> list[tuple[int, float]]:
+    """Refuse the first step of ``t`` (n,) s longer than :data:`MAX_TIME_STEP_S`; return
+    ``(line, step s)`` of every step longer than :data:`GAP_FACTOR` × the median step."""
+    full = t if previous is None else np.r_[previous, t]
+    steps = np.diff(full)
+    if not steps.size:
+        return []
+    offset = 1 if previous is None else 0                    # line of steps[j] = first_line + j + offset
+    huge = np.flatnonzero(steps > MAX_TIME_STEP_S)
+    if huge.size:
+        j = int(huge[0])
+        raise ImportInputError(f"{where} line {first_line + j + offset}, column time: {brief(full[j + 1])} s is "
+                               f"{brief(steps[j])} s after the line before, more than {MAX_TIME_STEP_S:g} s; "
+                               f"a time column must not jump (a broken clock or a corrupt cell?)")
+    gaps = np.flatnonzero(steps > GAP_FACTOR * np.median(steps))
+    return [(first_line + int(j) + offset, float(steps[j])) for j in gaps]
+
+
 class CsvFile:
     """A BioTac CSV file read in chunks (the :class:`.recording.Reader` protocol).
 
@@ -284,7 +312,7 @@ class CsvFile:
     def chunks(self, frames: int = CHUNK_FRAMES) -> Iterator[Recording]:
         """Every row, checked, as :class:`Recording` chunks of at most ``frames`` rows."""
         cols, where = self.cols, self.where
-        rows, last_t, rounded = 0, None, False
+        rows, last_t, rounded, gaps = 0, None, False, []
         with self._open() as f:
             f.readline(HEADER_MAX_CHARS + 1)
             for first, lines in line_batches(f, frames, max_line_chars(len(self.header)), where):
@@ -294,6 +322,7 @@ class CsvFile:
                 if cols.time is not None:
                     t = data[:, cols.time].copy()
                     check_increasing(t, last_t, first, where)
+                    gaps += check_steps(t, last_t, first, where)
                     last_t = float(t[-1])
                 else:
                     t = np.arange(rows, rows + n) / self.rate_hz
@@ -308,6 +337,10 @@ class CsvFile:
         if rows < 2:
             raise ImportInputError(f"{where}: {rows} data row(s); need at least 2")
         self.meta.update(rows=rows, rounded_to_integer_counts=rounded)
+        if gaps:
+            line, step = max(gaps, key=lambda g: g[1])
+            self.meta["time_gaps"] = {"count": len(gaps), "largest_s": step, "at_line": line,
+                                      "rule": f"a step of the time column over {GAP_FACTOR:g} x the median step"}
 
     def finish(self, rate_hz: float) -> None:
         """With a ``time`` column: check a given ``rate_hz`` against the measured rate (Hz, from the

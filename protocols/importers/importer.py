@@ -6,10 +6,13 @@ writing (connected fingers, the early window of a baseline estimate, the clock m
 second pass (:func:`.writer.write_store`) writes the frames as they come.
 
 Order of work, so that bad input never leaves anything behind: check the options, discover
-the files, check no target exists, scan every file, choose the fingers and the baseline,
-then write each run into a hidden staging directory beside its target (the rate check,
-which needs the exact median interval, is made on the stored times) and rename them all
-into place at the end. Any error before the renames removes every staging directory.
+the files (a directory's subfolders included), check no target exists, remove what a
+killed import left, scan every file, choose the fingers and the baseline (one pool for the
+whole import), then write each run into a hidden staging directory beside its target (the
+rate check, which needs the exact median interval, is made on the stored times) and rename
+them all into place at the end. A bad file of a directory is left out, and named once the
+others are in place (:class:`ImportIncomplete`); any other error before the renames removes
+every staging directory.
 """
 
 from __future__ import annotations
@@ -24,11 +27,11 @@ from protocols.provenance import collect
 
 from .bag import TOPIC, BagFile
 from .baseline import Baseline, EarlyWindow, estimate_baseline, load_calibration
-from .csv import CsvFile
+from .csv import GAP_FACTOR, CsvFile
 from .recording import (CHUNK_FRAMES, Connectivity, ImportInputError, Prepared, Reader, Recording, Scan,
                         decide_fingers, keep_fingers, parse_rate)
 from .sources import Source, checksum, discover, sha256_file
-from .writer import discard, publish, staging_dir, write_run
+from .writer import discard, publish, release_staging, remove_stale_staging, staging_dir, write_run
 
 BASELINES = ("auto", "none", "file", "estimate")
 
@@ -75,6 +78,7 @@ class ImportResult:
     rate_hz: float
     baseline: str
     warnings: list[str] = field(default_factory=list)
+    subfolder: str = ""
 
 
 def open_source(src: Source, settings: ImportSettings) -> Reader:
@@ -152,56 +156,98 @@ def choose_baseline(settings: ImportSettings, recs: list[Recording], names: list
     return None
 
 
+class ImportIncomplete(ImportInputError):
+    """Some files of a directory could not be imported; the others were. ``results``: the
+    imported files; ``failures``: ``[(path, one-sentence reason)]`` for every file that was not."""
+
+    def __init__(self, results: list, failures: list[tuple[str, str]]):
+        self.results, self.failures = results, failures
+        super().__init__(f"{len(failures)} of {len(failures) + len(results)} files not imported: "
+                         + "; ".join(reason for _, reason in failures))
+
+
 def import_source(source, out, settings: ImportSettings | None = None, *, config_yaml: str | None = None,
                   overrides=(), console=None) -> list[ImportResult]:
     """Import ``source`` into one run directory per file under ``out``.
 
-    Each run directory ``out/<file stem>/`` holds ``run.zarr`` (the run store) and ``run.json``
-    (provenance, status ``success``). Raises :class:`ImportInputError` (one sentence; nothing
-    written) for bad input, ``FileExistsError`` when a run directory already exists.
+    Each run directory ``out/<subfolder>/<file stem>/`` (the source's folder tree, mirrored)
+    holds ``run.zarr`` (the run store) and ``run.json`` (provenance, status ``success``).
+    A bad file of a directory is left out and the others are imported: then
+    :class:`ImportIncomplete` names every bad file (after the good ones are in place). Raises
+    :class:`ImportInputError` (one sentence; nothing written) when nothing can be imported,
+    ``FileExistsError`` when a run directory already exists; any other failure (a full disk)
+    writes nothing at all.
     """
     settings = settings or ImportSettings()
     check_settings(settings)
     out = Path(out)
     sources = discover(source)
-    targets = [out / s.name for s in sources]
+    targets = [src.target(out) for src in sources]
     _check_targets(out, targets)                                        # before reading anything long
-    prepared = [prepare(src, settings) for src in sources]              # first pass: read and check all
-    heads = [keep_fingers(p.scan.head, p.fingers) for p in prepared]
-    baseline = choose_baseline(settings, heads, [str(s.path) for s in sources])
+    remove_stale_staging({t.parent for t in targets})
+    failures: list[tuple[str, str]] = []
+    prepared = {}
+    for src in sources:                                                 # first pass: read and check all
+        try:
+            prepared[src] = prepare(src, settings)
+        except ImportInputError as exc:
+            if len(sources) == 1:
+                raise
+            failures.append((str(src.path), str(exc)))
+    if not prepared:
+        raise ImportInputError(f"source={source}: no file could be imported: "
+                               + "; ".join(reason for _, reason in failures))
+    good = [src for src in sources if src in prepared]
+    heads = [keep_fingers(prepared[src].scan.head, prepared[src].fingers) for src in good]
+    baseline = choose_baseline(settings, heads, [str(src.path) for src in good])
     if baseline is not None:
-        for src, p in zip(sources, prepared):
-            baseline.counts(p.fingers, where=str(src.path))             # every finger covered
+        for src in good:
+            baseline.counts(prepared[src].fingers, where=str(src.path))       # every finger covered
     _check_targets(out, targets)
     config_yaml = config_yaml if config_yaml is not None else json.dumps(
         {"source": str(source), "out": str(out), **asdict(settings)}, indent=1)
-    missing_dirs = [d for d in (out, *out.parents) if not d.exists()]      # created by staging; removed on error
-    staged, results = [], []
+    missing_dirs = sorted({d for t in targets for d in (t.parent, *t.parent.parents) if not d.exists()},
+                          key=lambda d: -len(d.parts))                  # made by staging; removed on error
+    staged, written, results = [], [], []
     try:
-        for src, p, target in zip(sources, prepared, targets):
+        for src in good:
+            p, target = prepared[src], src.target(out)
             staging = staging_dir(target)
             staged.append(staging)
-            import_attrs, prov = run_metadata(src, p, baseline, config_yaml, overrides, len(sources))
-            summary = write_run(p, staging, prov, import_attrs, baseline)    # second pass
+            import_attrs, prov = run_metadata(src, p, baseline, config_yaml, overrides, len(good))
+            try:
+                summary = write_run(p, staging, prov, import_attrs, baseline)    # second pass
+            except ImportInputError as exc:         # found while writing (a rate that disagrees, a changed file)
+                if len(sources) == 1:
+                    raise
+                discard([staging])
+                failures.append((str(src.path), str(exc)))
+                continue
+            written.append((staging, target))
             results.append(ImportResult(str(src.path), import_attrs["sha256"], str(target),
                                         str(target / "run.zarr"), list(p.fingers), p.decision["dropped"],
                                         p.scan.frames, summary["rate_hz"], baseline.method if baseline else "none",
-                                        reader_warnings(p.reader.meta)))
-        publish(list(zip(staged, targets)))
+                                        reader_warnings(p.reader.meta), src.subfolder))
+        publish(written)
     except BaseException:
         discard(staged)
-        for d in missing_dirs:                  # deepest first; only if still empty
+        for d in missing_dirs:                  # deepest first; only if empty
             try:
                 d.rmdir()
             except OSError:
-                break
+                pass
         raise
+    finally:
+        for s in staged:
+            release_staging(s)
     if console:
         for r in results:
             dropped = f", dropped {', '.join(f'{f} ({why})' for f, why in r.dropped.items())}" if r.dropped else ""
             console(f"imported {r.source} -> {r.store}: {r.frames} frames at {r.rate_hz:.4g} Hz, "
                     f"fingers {', '.join(r.fingers)}{dropped}; baseline: {r.baseline}"
                     + "".join(f"; WARNING: {w}" for w in r.warnings))
+    if failures:
+        raise ImportIncomplete(results, failures)
     return results
 
 
@@ -213,12 +259,18 @@ def _check_targets(out: Path, targets: list[Path]) -> None:
 
 
 def reader_warnings(meta: dict) -> list[str]:
-    """Sentences for what a reader noted about a damaged file (``meta["truncated"]``)."""
+    """Sentences for what a reader noted about a damaged file (``meta["truncated"]``) or its
+    time column (``meta["time_gaps"]``)."""
+    out = []
     t = meta.get("truncated")
-    if not t:
-        return []
-    return [f"truncated bag: the file ({t['file_bytes']} bytes) ends {t['ends']}; imported the "
-            f"{t['messages_read']} complete messages before that; lost: {t['messages_lost']}"]
+    if t:
+        out.append(f"truncated bag: the file ({t['file_bytes']} bytes) ends {t['ends']}; imported the "
+                   f"{t['messages_read']} complete messages before that; lost: {t['messages_lost']}")
+    g = meta.get("time_gaps")
+    if g:
+        out.append(f"time column: {g['count']} gap(s) longer than {GAP_FACTOR:g} x the median step, the "
+                   f"largest {g['largest_s']:.4g} s at line {g['at_line']}")
+    return out
 
 
 def run_metadata(src: Source, prepared: Prepared, baseline: Baseline | None, config_yaml: str,
@@ -233,8 +285,9 @@ def run_metadata(src: Source, prepared: Prepared, baseline: Baseline | None, con
     summ = checksum(src)
     importer = _importer(src)
     meta, fingers = prepared.reader.meta, prepared.fingers
-    import_attrs = {"source": str(src.path.resolve()), "source_name": src.path.name, "sha256": summ["sha256"],
-                    "source_bytes": summ["bytes"], "source_files": summ["files"], "importer": importer,
+    import_attrs = {"source": str(src.path.resolve()), "source_name": src.path.name, "subfolder": src.subfolder,
+                    "sha256": summ["sha256"], "source_bytes": summ["bytes"], "source_files": summ["files"],
+                    "importer": importer,
                     "reader": meta, "fingers": prepared.decision, "frames": prepared.scan.frames,
                     "rate_hz": None, "channels": list(prepared.scan.channels), "files_in_import": n_sources}
     identity = {"biotac": {"model": "SynTouch BioTac SP (imported)", "serial_or_address": src.path.name,

@@ -20,6 +20,7 @@ from typing import Callable, Iterable, Iterator, Protocol
 import numpy as np
 
 from hardware.biotac import FINGERS, N_TAXELS
+from hardware.errors import RATE_RANGE_HZ, brief
 from protocols.clockmodel import ClockFit
 
 #: relative disagreement allowed between ``rate_hz`` and the rate of a file's own timestamps
@@ -148,15 +149,20 @@ def rate_of(interval_s) -> float:
 
 
 def parse_rate(rate_hz) -> float | None:
-    """``rate_hz`` (Hz) as a positive float, or ``None``; :class:`ImportInputError` otherwise."""
+    """``rate_hz`` (Hz) as a float within :data:`hardware.errors.RATE_RANGE_HZ`, or ``None``;
+    :class:`ImportInputError` otherwise."""
     if rate_hz is None:
         return None
     try:
         rate = float(rate_hz)
-    except (TypeError, ValueError):
-        raise ImportInputError(f"rate_hz={rate_hz!r}: expected a number of Hz") from None
+    except (TypeError, ValueError, OverflowError):
+        raise ImportInputError(f"rate_hz={brief(rate_hz)}: expected a number of Hz") from None
+    lo, hi = RATE_RANGE_HZ
     if not math.isfinite(rate) or rate <= 0:
-        raise ImportInputError(f"rate_hz={rate_hz}: expected a positive number of Hz")
+        raise ImportInputError(f"rate_hz={brief(rate_hz)}: expected a positive number of Hz in [{lo:g}, {hi:g}]")
+    if not lo <= rate <= hi:
+        raise ImportInputError(f"rate_hz={brief(rate_hz)}: expected a number of Hz in [{lo:g}, {hi:g}] "
+                               f"(a BioTac streams at about 100 Hz)")
     return rate
 
 

@@ -40,6 +40,8 @@ import numpy as np
 import zarr
 
 from hardware.biotac import COUNTS_MAX, PAC_RATE_HZ
+from hardware.device import batch_times
+from protocols import rundir
 from protocols.clockmodel import ClockFit, latency_stats, sequence_gaps
 from protocols.provenance import write_run_json
 from protocols.store import RunStore, jsonable
@@ -97,17 +99,17 @@ def biotac_block(rec: Recording, to_run, host_t0: float) -> dict:
             "pdc": _i16(chan["pdc"]), "tdc": _i16(chan["tdc"]), "tac": _i16(chan["tac"])}
 
 
-def pac_block(rec: Recording, to_run, host_t0: float, rate_hz: float = PAC_RATE_HZ) -> dict:
+def pac_block(rec: Recording, to_run, host_t0: float, rate_hz: float = PAC_RATE_HZ,
+              previous: float | None = None) -> dict:
     """``biotac_pac`` columns of a chunk with PAC: (M, F) int16 ``pac`` and (M,) ``time_pac``,
-    ``device_time``, ``host_time`` (s). A frame's n samples end at its timestamp, 1/rate apart:
-    sample k (0..n−1) at ``device_time − (n−1−k)/rate``, as :func:`protocols.recorder.pac_columns`."""
+    ``device_time``, ``host_time`` (s). A frame's n samples end at its timestamp, 1/rate apart
+    (closer when the frame follows the one before sooner than that), strictly increasing, as
+    :func:`protocols.recorder.pac_columns`; ``previous``: the last PAC device time before the chunk."""
     counts = np.array([p.shape[1] for p in rec.pac], np.int64)                  # (N,)
     pac = np.concatenate([p.T for p in rec.pac]) if len(rec.pac) else np.zeros((0, len(rec.fingers)))
-    start = np.repeat(np.cumsum(counts) - counts, counts)
-    back = np.repeat(counts, counts) - 1 - (np.arange(int(counts.sum())) - start)
-    device = np.repeat(np.asarray(rec.device_time, float), counts) - back / rate_hz
+    device = batch_times(rec.device_time, counts, 1.0 / rate_hz, previous)
     host = (np.repeat(np.asarray(rec.host_time, float), counts) if rec.host_time is not None
-            else np.full(len(back), np.nan))
+            else np.full(len(device), np.nan))
     return {"time_pac": to_run(device) if len(device) else np.zeros(0), "device_time": device,
             "host_time": host - host_t0, "pac": _i16(pac)}
 
@@ -206,14 +208,16 @@ def _append_chunks(store: RunStore, prepared: Prepared, to_run, host_t0: float, 
     (device s, host s) of every ``max(1, N // LATENCY_SAMPLE)``-th frame."""
     step = max(1, prepared.scan.frames // LATENCY_SAMPLE)
     samples = gaps = missing = invalid = 0
-    last_seq = last_time = None
+    last_seq = last_time = last_pac = None
     sample_d, sample_h = [], []
     store.append("events", event_block([(0.0, "info", "import", import_detail)]))
     for chunk in prepared.chunks():
         bio = biotac_block(chunk, to_run, host_t0)
         blocks = {"biotac": bio}
         if chunk.pac is not None:
-            blocks["biotac_pac"] = pac_block(chunk, to_run, host_t0)
+            blocks["biotac_pac"] = pac_block(chunk, to_run, host_t0, previous=last_pac)
+            if len(blocks["biotac_pac"]["device_time"]):
+                last_pac = float(blocks["biotac_pac"]["device_time"][-1])
         events = gap_events(bio["seq"], bio["time"], last_seq, last_time)
         if events:
             blocks["events"] = event_block(events)
@@ -261,14 +265,34 @@ def _iso(epoch_s: float) -> str | None:
 
 
 # ----------------------------------------------------------------------------- staging
+STAGING_MARK = ".importing-"
+
+
 def staging_dir(target: Path) -> Path:
-    """A fresh hidden directory beside ``target`` (same filesystem, so the rename is atomic)."""
+    """A fresh hidden directory beside ``target`` (same filesystem, so the rename is atomic),
+    locked by this process (:mod:`protocols.rundir`) until :func:`release_staging`, so that
+    :func:`remove_stale_staging` can tell a live import's staging from a killed one's."""
     target.parent.mkdir(parents=True, exist_ok=True)
-    path = Path(tempfile.mkdtemp(prefix=f".{target.name}.importing-", dir=target.parent))
+    path = Path(tempfile.mkdtemp(prefix=f".{target.name}{STAGING_MARK}", dir=target.parent))
+    rundir.acquire(path)
     umask = os.umask(0)
     os.umask(umask)
     path.chmod(0o777 & ~umask)                  # mkdtemp makes it 0700; the run directory is not private
     return path
+
+
+def release_staging(path: Path) -> None:
+    """Give back the lock of a staging directory (published, discarded or not)."""
+    rundir.release(path)
+
+
+def remove_stale_staging(folders) -> list[Path]:
+    """Remove the staging directories a killed import left in ``folders`` (no live process
+    holds their lock); returns them."""
+    stale = [p for folder in folders if Path(folder).is_dir() for p in sorted(Path(folder).glob(f".*{STAGING_MARK}*"))
+             if p.is_dir() and rundir.holder(p) is None]
+    discard(stale)
+    return stale
 
 
 def write_run(prepared: Prepared, staging: Path, provenance: dict, import_attrs: dict,

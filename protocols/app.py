@@ -1,0 +1,51 @@
+"""Running this project's Hydra apps (``tactile-run``, ``tactile-analyze``, ``tactile-import``).
+
+:func:`run_app` puts the config guard (:mod:`protocols.config_guard`) in front of Hydra and
+turns what Hydra or the guard refuses into one line and exit status 2, and a stray Ctrl-C or
+SIGTERM into one line and exit status 3.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import traceback
+
+from .config_guard import install
+
+BAD_INPUT, INTERRUPTED = 2, 3
+
+
+def run_app(app, argv=None) -> None:
+    """Run a ``@hydra.main`` app behind the guard: a config the guard or Hydra refuses (an
+    unknown key, bad YAML, a protocol setting ``hydra.*``...) is one line on stderr naming
+    it and exit status 2; ``verbose=true`` on the command line adds the traceback. SIGTERM
+    is Ctrl-C (the apps' jobs own both while they write); one outside a job ends the
+    process with one line and exit status 3; once the app is done, both are ignored."""
+    argv = sys.argv[1:] if argv is None else argv
+    os.environ["HYDRA_FULL_ERROR"] = "1"         # Hydra raises instead of printing several lines
+    if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        install(argv)
+        app()
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        sys.exit(INTERRUPTED)
+    except Exception as exc:
+        if "verbose=true" in argv:
+            traceback.print_exception(exc)
+        print(f"error: {error_line(exc)}", file=sys.stderr)
+        sys.exit(BAD_INPUT)
+    finally:
+        for s in (signal.SIGINT, signal.SIGTERM):   # the app is done: a late signal must not turn
+            signal.signal(s, signal.SIG_IGN)        # its exit status into a kill (at interpreter exit)
+
+
+def error_line(exc: BaseException) -> str:
+    """An exception and its cause as one line (Hydra's messages span several)."""
+    parts = [str(exc)]
+    if exc.__cause__ is not None and str(exc.__cause__) not in parts[0]:
+        parts.append(str(exc.__cause__))
+    return "; ".join(line.strip() for part in parts for line in part.splitlines() if line.strip())

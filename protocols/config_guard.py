@@ -1,0 +1,217 @@
+"""Every config file Hydra reads is checked first: protocols are data, never code or Hydra settings.
+
+A protocol (and a surface, hardware, analysis or experiment file) is shared between labs as
+data. Hydra composes them with its own settings, and a file that writes under ``hydra`` —
+``hydra.callbacks``, ``hydra.job_logging`` — makes Hydra instantiate objects or open files
+*before* the run's own checks ever see the config. So the check happens where Hydra reads a
+file: :func:`install` replaces Hydra's ``file://`` and ``pkg://`` config sources by the
+guarded ones below, which refuse, naming the file and the key:
+
+- in any file: YAML nested deeper than :data:`MAX_DEPTH` levels, aliases that expand to
+  more than :data:`MAX_NODES` nodes (an "alias bomb"), files above :data:`MAX_BYTES`;
+- in a file of a data group (every group but ``hydra/...``, whose files Hydra and the
+  command line choose): any key under ``hydra`` (an experiment may set only
+  ``hydra.sweeper.params``, and not for ``hydra`` keys), any ``_target_``, and defaults
+  entries that select a ``hydra`` group or move a config to ``hydra`` or ``_global_``.
+
+The primary config (``conf/config.yaml``...) and ``hydra/...`` files are the project's own
+settings or chosen by name on the command line: only the size checks apply to them.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+
+import yaml
+from hydra._internal.core_plugins.file_config_source import FileConfigSource as _File
+from hydra._internal.core_plugins.importlib_resources_config_source import (
+    ImportlibResourcesConfigSource as _Package, resources)
+from hydra._internal.sources_registry import SourcesRegistry
+from hydra.core.plugins import Plugins
+from hydra.plugins.config_source import ConfigResult
+from omegaconf import DictConfig, ListConfig, OmegaConf
+
+MAX_BYTES = 1 << 20          # a config file is a few kB
+MAX_DEPTH = 48               # nested mappings/lists: 8 nested repeats of a protocol need ~30
+MAX_NODES = 100_000          # YAML nodes once aliases are expanded
+SWEEP_KEY = "hydra.sweeper.params"
+
+
+class ConfigFileError(ValueError):
+    """A config file that must not be composed; the message names the file and the key."""
+
+
+def install(argv=None) -> None:
+    """Make Hydra read config files through the guarded sources (call before ``@hydra.main``),
+    after checking the command line's overrides (``argv``, default ``sys.argv[1:]``)."""
+    check_overrides(sys.argv[1:] if argv is None else argv)
+    Plugins.instance()                   # Hydra registers its own sources on first use; then ours replace them
+    registry = SourcesRegistry.instance()
+    registry.types["file"] = FileConfigSource
+    registry.types["pkg"] = ImportlibResourcesConfigSource
+
+
+# ----------------------------------------------------------------------------- the text
+def check_overrides(args) -> None:
+    """Refuse a command-line value nested deeper than :data:`MAX_DEPTH` (``[``/``{`` outside
+    quotes): Hydra's override parser would exhaust Python's recursion on it."""
+    for arg in args:
+        depth, quote = 0, None
+        for ch in arg:
+            if quote:
+                quote = None if ch == quote else quote
+            elif ch in "'\"":
+                quote = ch
+            elif ch in "[{":
+                depth += 1
+                if depth > MAX_DEPTH:
+                    key = arg.split("=", 1)[0]
+                    raise ConfigFileError(f"{key}: the value is nested more than {MAX_DEPTH} levels deep")
+            elif ch in "]}":
+                depth -= 1
+
+
+def check_text(text: str, where: str) -> None:
+    """Refuse YAML too large, too deep or whose aliases expand too far (before it is built)."""
+    if len(text) > MAX_BYTES:
+        raise ConfigFileError(f"{where}: {len(text)} bytes, more than {MAX_BYTES}; a config file is a few kB")
+    depth = 0
+    try:
+        for event in yaml.parse(text, Loader=yaml.SafeLoader):        # a stream of events: no recursion
+            if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+                depth += 1
+                if depth > MAX_DEPTH:
+                    line = event.start_mark.line + 1
+                    raise ConfigFileError(f"{where} line {line}: nested more than {MAX_DEPTH} levels deep")
+            elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+                depth -= 1
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError as exc:
+        raise ConfigFileError(f"{where}: not valid YAML ({' '.join(str(exc).split())})") from None
+    if node is not None and expanded_size(node) > MAX_NODES:
+        raise ConfigFileError(f"{where}: its YAML aliases (*name) expand to more than {MAX_NODES} values; "
+                              f"refusing to build it (write the values out, or use ${{...}} interpolation)")
+
+
+def expanded_size(node, memo: dict | None = None) -> int:
+    """Nodes of a composed YAML graph once every alias is expanded (shared nodes counted each
+    time they are used), counted without expanding: the graph is a DAG, sizes are memoised."""
+    memo = {} if memo is None else memo
+    key = id(node)
+    if key not in memo:
+        memo[key] = 0                                # a (refused) cycle counts once
+        if isinstance(node, yaml.MappingNode):
+            children = [n for pair in node.value for n in pair]
+        elif isinstance(node, yaml.SequenceNode):
+            children = node.value
+        else:
+            children = []
+        total = 1
+        for child in children:
+            total += expanded_size(child, memo)
+            if total > MAX_NODES:
+                break
+        memo[key] = total
+    return memo[key]
+
+
+# ----------------------------------------------------------------------------- the content
+def check_result(result: ConfigResult, config_path: str, where: str) -> None:
+    """Refuse a data-group file that reaches Hydra's settings or names a ``_target_``."""
+    group = config_path.rsplit("/", 1)[0] if "/" in config_path else ""
+    if group == "" or group == "hydra" or group.startswith("hydra/"):
+        return                                       # the primary config and Hydra's own groups
+    cfg = result.config
+    if not isinstance(cfg, DictConfig):
+        return
+    package = result.header.get("package") or group.replace("/", ".")
+    package = group.replace("/", ".") if package == "_group_" else package
+    _check_defaults(cfg, where)
+    for key, value in _leaves(cfg, ""):
+        key = key if package == "_global_" else f"{package}.{key}"
+        if key.split(".")[-1] == "_target_":
+            raise ConfigFileError(f"{where}: {key}: a config file is data; it may not name code to run "
+                                  f"(_target_ {_brief(value)})")
+        if key == "hydra" or key.startswith("hydra."):
+            if group == "experiment" and key.startswith(SWEEP_KEY + "."):
+                _check_sweep_param(key[len(SWEEP_KEY) + 1:], where)
+                continue
+            raise ConfigFileError(f"{where}: {key}: a {group} file is data; it may not change Hydra's settings "
+                                  f"(hydra.*){' other than ' + SWEEP_KEY if group == 'experiment' else ''}")
+
+
+def _check_defaults(cfg: DictConfig, where: str) -> None:
+    entries = cfg.get("defaults")
+    if not isinstance(entries, ListConfig):
+        return
+    for i, entry in enumerate(entries):
+        text = entry if isinstance(entry, str) else " ".join(str(k) for k in entry.keys()) \
+            if isinstance(entry, DictConfig) else str(entry)
+        words = [w for w in re.split(r"[\s/]+", text) if w and w not in ("override", "optional")]
+        group, _, package = (words[0] if words else "").partition("@")
+        if group.startswith("hydra") or package.startswith("hydra") or package == "_global_":
+            raise ConfigFileError(f"{where}: defaults[{i}] ({_brief(text)}): a data file may only select data "
+                                  f"groups (protocol, surface, hardware, ...): not hydra/..., not @hydra or "
+                                  f"@_global_")
+
+
+def _check_sweep_param(name: str, where: str) -> None:
+    bare = name.lstrip("+~")
+    if bare.startswith("hydra") or bare.split(".")[-1] == "_target_":
+        raise ConfigFileError(f"{where}: {SWEEP_KEY}.{name}: a sweep may only vary the run's own keys, "
+                              f"not Hydra's or a _target_")
+
+
+def _leaves(node, key: str):
+    """(dotted key, value) of every leaf under ``node`` (unresolved), through mappings and
+    lists; the file's own ``defaults`` list is skipped (see :func:`_check_defaults`)."""
+    if isinstance(node, (DictConfig, ListConfig)) and (node._is_none() or node._is_missing()):
+        yield key, None
+        return
+    if isinstance(node, DictConfig):
+        items = [(str(k), node._get_node(k)) for k in node.keys() if not (key == "" and k == "defaults")]
+    elif isinstance(node, ListConfig):
+        items = [(f"[{i}]", n) for i, n in enumerate(node._iter_ex(resolve=False))]
+    else:
+        yield key, node._value() if hasattr(node, "_value") else node
+        return
+    if not items and key:
+        yield key, None
+    for name, child in items:
+        yield from _leaves(child, (f"{key}{name}" if name.startswith("[") else f"{key}.{name}") if key else name)
+
+
+def _brief(value, limit: int = 60) -> str:
+    text = repr(OmegaConf.to_container(value) if isinstance(value, (DictConfig, ListConfig)) else value)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+# ----------------------------------------------------------------------------- the sources
+# Named as Hydra's own classes: Hydra's registry keeps a source of the same name (see install).
+class FileConfigSource(_File):
+    """Hydra's ``file://`` source, reading through :func:`check_text` and :func:`check_result`."""
+
+    def load_config(self, config_path: str) -> ConfigResult:
+        full = os.path.realpath(os.path.join(self.path, self._normalize_file_name(config_path)))
+        if os.path.isfile(full):
+            with open(full, encoding="utf-8", errors="replace") as f:
+                check_text(f.read(MAX_BYTES + 1), full)
+        result = super().load_config(config_path)
+        check_result(result, config_path, full)
+        return result
+
+
+class ImportlibResourcesConfigSource(_Package):
+    """Hydra's ``pkg://`` source, guarded like :class:`FileConfigSource`."""
+
+    def load_config(self, config_path: str) -> ConfigResult:
+        name = self._normalize_file_name(config_path)
+        where = f"pkg://{self.path}/{name}"
+        res = resources.files(self.path).joinpath(name)
+        if res.is_file():
+            check_text(res.read_bytes()[:MAX_BYTES + 1].decode("utf-8", "replace"), where)
+        result = super().load_config(config_path)
+        check_result(result, config_path, where)
+        return result

@@ -1,0 +1,94 @@
+"""One run directory, one writer: an exclusive lock held for as long as a process writes it.
+
+``tactile-run`` takes the lock of its run directory (of its sweep directory with ``-m``)
+before Hydra writes anything there (:class:`protocols.cli.RunDirLock`) and the run keeps it
+until ``run.json`` is written; ``tactile-recover`` takes it too, so it never closes the store
+of a run that is still recording, and two processes never write one directory.
+
+The lock is ``fcntl.flock`` on ``<dir>/.tactile.lock`` (the file holds the owner's pid, for
+messages). The kernel releases it when the process ends, however it ends (SIGKILL
+included), so a killed run leaves no stale lock. Within one process the lock is
+re-entrant: the CLI and the run it starts share it.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+from contextlib import contextmanager
+from pathlib import Path
+
+LOCK_NAME = ".tactile.lock"
+_held: dict[str, list] = {}               # resolved directory -> [fd, depth], this process
+
+
+class RunDirBusy(ValueError):
+    """Another process holds the directory's lock."""
+
+
+def acquire(directory) -> None:
+    """Take the lock of ``directory`` (created if needed); :class:`RunDirBusy` naming the
+    owner's pid if another process holds it."""
+    directory = Path(directory)
+    key = str(directory.resolve())
+    if key in _held:
+        _held[key][1] += 1
+        return
+    directory.mkdir(parents=True, exist_ok=True)
+    fd = os.open(directory / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        owner = _read_pid(fd)
+        os.close(fd)
+        raise RunDirBusy(f"{directory} is in use by another process{f' (pid {owner})' if owner else ''}; "
+                         f"one run directory has one writer: choose another directory or wait for it "
+                         f"to end") from None
+    os.ftruncate(fd, 0)
+    os.write(fd, f"{os.getpid()}\n".encode())
+    _held[key] = [fd, 1]
+
+
+def release(directory) -> None:
+    """Give back one :func:`acquire` of ``directory`` (the lock goes with the last one)."""
+    key = str(Path(directory).resolve())
+    entry = _held.get(key)
+    if entry is None:
+        return
+    entry[1] -= 1
+    if entry[1] == 0:
+        del _held[key]
+        os.close(entry[0])                 # closing the descriptor releases the flock
+
+
+@contextmanager
+def locked(directory):
+    """``with locked(run_dir): ...`` — :func:`acquire` then :func:`release`."""
+    acquire(directory)
+    try:
+        yield
+    finally:
+        release(directory)
+
+
+def holder(directory) -> int | None:
+    """The pid of another process holding ``directory``'s lock, or ``None`` when it is free
+    (or held by this process)."""
+    path = Path(directory) / LOCK_NAME
+    if str(Path(directory).resolve()) in _held or not path.exists():
+        return None
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return _read_pid(fd) or -1
+    finally:
+        os.close(fd)
+    return None
+
+
+def _read_pid(fd: int) -> int | None:
+    try:
+        return int(os.pread(fd, 32, 0).decode().strip() or 0) or None
+    except (OSError, ValueError):
+        return None

@@ -1,0 +1,107 @@
+"""A killed analysis leaves neither debris nor stale results, and resuming a sweep finishes it
+(issue 13, item 9). Real runs, real ``tactile-analyze``/``tactile-run`` processes, SIGKILL."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from analysis.run import analyze_run
+from protocols.resume import analysis_state
+
+pytestmark = pytest.mark.slow
+RUN = [sys.executable, "-c", "from protocols.cli import main; main()", "progress=false"]
+ANALYZE = [sys.executable, "-c", "from analysis.cli import main; main()"]
+FAST = {"progress": False, "figures": False}
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    root = tmp_path_factory.mktemp("rec")
+    proc = subprocess.run([*RUN, "analyze=false", "hydra.run.dir=run"], cwd=root, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    return root / "run" / "run.zarr"
+
+
+@pytest.fixture
+def store(recorded, tmp_path):
+    shutil.copytree(recorded.parent, tmp_path / "run", ignore=shutil.ignore_patterns(".tactile.lock"))
+    return tmp_path / "run" / "run.zarr"
+
+
+def test_a_killed_analysis_leaves_debris_that_the_next_one_removes(store):
+    proc = subprocess.Popen([*ANALYZE, f"run={store}", "analysis.figures=true"], cwd=store.parent,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 240
+    while not list(store.parent.glob(".analysis-staging-*")) and proc.poll() is None:
+        assert time.monotonic() < deadline
+        time.sleep(0.005)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    assert list(store.parent.glob(".analysis-staging-*")) and analysis_state(store.parent) == "missing"
+
+    lines = []
+    analyze_run(store, FAST, console=lines.append)
+    assert any("removed what a killed analysis left" in x for x in lines), lines
+    assert not list(store.parent.glob(".analysis-*")) and analysis_state(store.parent) == "complete"
+
+
+def test_an_analysis_stopped_between_its_renames_is_incomplete_never_stale(store, monkeypatch):
+    """The previous analysis's ``summary.json`` never stands beside another analysis's outputs:
+    it goes first, the new one comes last (the renames are interrupted after the first)."""
+    first = analyze_run(store, FAST, console=lambda *a: None)
+    calls, replace = [], os.replace
+
+    def interrupted(src, dst, *args, **kwargs):
+        if any(p.parent.name.startswith(".analysis-") for p in (Path(src), Path(dst))):    # swap_in's renames
+            calls.append(Path(dst).name)
+            if len(calls) == 3:                # the old summary and analysis.zarr moved aside, the new ones not in
+                raise KeyboardInterrupt
+        return replace(src, dst, *args, **kwargs)
+    monkeypatch.setattr(os, "replace", interrupted)         # zarr renames too: only swap_in's are stopped
+    with pytest.raises(KeyboardInterrupt):
+        analyze_run(store, FAST, console=lambda *a: None)
+    monkeypatch.setattr(os, "replace", replace)
+    assert calls == ["summary.json", "analysis.zarr", "analysis.zarr"]
+    assert not (store.parent / "summary.json").exists()
+    assert analysis_state(store.parent) in ("incomplete", "missing")
+
+    second = analyze_run(store, FAST, console=lambda *a: None)
+    assert second["analysis_id"] != first["analysis_id"] and analysis_state(store.parent) == "complete"
+
+
+def test_outputs_of_two_analyses_side_by_side_are_incomplete(store, tmp_path):
+    """What the previous code could leave (a kill between its renames): an old
+    ``summary.json`` beside a new ``analysis.zarr``. The ids tell them apart."""
+    analyze_run(store, FAST, console=lambda *a: None)
+    old_summary = (store.parent / "summary.json").read_text()
+    analyze_run(store, FAST, console=lambda *a: None)
+    (store.parent / "summary.json").write_text(old_summary)
+    assert analysis_state(store.parent) == "incomplete"
+
+
+def test_resuming_a_sweep_analyses_a_run_whose_analysis_was_killed(tmp_path):
+    sweep = ["-m", "protocol.sweep_speed=10,20", f"hydra.sweep.dir={tmp_path}/sweep"]
+    proc = subprocess.run([*RUN[:3], *sweep, "progress=false"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    jobs = sorted(p.parent for p in (tmp_path / "sweep").glob("*/run.json"))
+    assert [analysis_state(j) for j in jobs] == ["complete", "complete"]
+    (jobs[1] / "summary.json").unlink()                       # as a kill during its analysis leaves it
+    run_id = json.loads((jobs[1] / "run.json").read_text())["run_id"]
+
+    proc = subprocess.run([*RUN[:3], *sweep, "progress=false", "resume=true"], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert "skipped" in proc.stdout and "analysing it again" in proc.stdout
+    assert json.loads((jobs[1] / "run.json").read_text())["run_id"] == run_id      # not recorded again
+    assert [analysis_state(j) for j in jobs] == ["complete", "complete"]
+    table = (tmp_path / "sweep" / "summary.csv").read_text().splitlines()
+    assert len(table) == 3 and all(",complete," in row for row in table[1:]), table

@@ -1,0 +1,225 @@
+"""A run's whole life under faults, injected for real on ``tactile-run`` processes (issue 13,
+items 7, 8, 11, 13, 14): kills measured in the run's own time, signals in every phase, a
+lost arm link, two writers of one directory, an analysis that fails or is interrupted."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from protocols import rundir
+from protocols.interrupts import Interrupts
+from protocols.recover import main as recover_main
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN = [sys.executable, "-c", "from protocols.cli import main; main()", "progress=false"]
+QUIET = ["analyze=false", "progress=false"]
+
+
+def start(tmp_path, *args, run_dir="run"):
+    return subprocess.Popen([*RUN, f"hydra.run.dir={run_dir}", *args], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def wait_for(predicate, timeout=90.0, step=0.01):
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError("timed out")
+        time.sleep(step)
+
+
+def store_opens_closed(store: Path, status: str):
+    tree = xr.open_datatree(store, engine="zarr")
+    assert tree.attrs["status"] == status
+    assert json.loads((store.parent / "run.json").read_text())["status"] == status
+    assert np.all(np.diff(tree["biotac"]["seq"].values) == 1)
+    return tree
+
+
+# ----------------------------------------------------------------------------- item 7: SIGKILL
+@pytest.mark.slow
+def test_a_killed_fast_simulated_run_keeps_all_but_its_last_second_of_its_own_time():
+    """Default runs (simulated lab, several times faster than real time) killed at three
+    points: the store keeps everything but the last second of the run's time."""
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_kill.py"), "--trials", "3",
+                           "--modes", "default", "--seed", "5"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    rows = [json.loads(line) for line in proc.stdout.splitlines()]
+    trials = [r for r in rows if "trial" in r]
+    assert len(trials) == 3 and all(r["frames"] > 0 for r in trials), trials
+    assert all(r["lost_s"] < 1.0 for r in trials), trials
+
+
+# ----------------------------------------------------------------------------- item 8: signals
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signals_every_50_ms_from_recording_to_exit_leave_a_closed_store(tmp_path, sig):
+    """Ctrl-C (or SIGTERM) every 50 ms from the moment the store exists until the process
+    ends: the first stops the run safely, the second at once, the rest land in the close.
+    No traceback, exit 3, the store opens ``aborted`` with ``run.json``, ``truth`` whole."""
+    proc = start(tmp_path, *QUIET)
+    wait_for(lambda: (tmp_path / "run" / "run.zarr").exists() or proc.poll() is not None)
+    while proc.poll() is None:
+        proc.send_signal(sig)
+        time.sleep(0.05)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 3 and "Traceback" not in err, err
+    assert ": aborted" in out
+    tree = store_opens_closed(tmp_path / "run" / "run.zarr", "aborted")
+    truth = tree["truth"]
+    assert truth.attrs["long_name"] == "simulator ground truth" and len(truth.children) > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signals_from_the_start_of_the_job_never_leave_a_half_made_store(tmp_path, sig):
+    """Signals every 20 ms from the moment the job starts (its run directory is locked;
+    planning, the lab, provenance and the store's creation follow): either the run never
+    starts (nothing recorded, one line) or its store is whole and closed ``aborted``. Never a
+    traceback, a store without status or a half-made one."""
+    proc = start(tmp_path, *QUIET)
+    wait_for(lambda: (tmp_path / "run" / rundir.LOCK_NAME).exists() or proc.poll() is not None, step=0.002)
+    while proc.poll() is None:
+        proc.send_signal(sig)
+        time.sleep(0.02)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 3 and "Traceback" not in err, (out, err)
+    assert not list((tmp_path / "run").glob(".*creating*")) if (tmp_path / "run").exists() else True
+    store = tmp_path / "run" / "run.zarr"
+    if store.exists():
+        store_opens_closed(store, "aborted")
+    else:
+        assert "nothing recorded" in out or "interrupted" in err, (out, err)
+
+
+def test_a_signal_before_the_first_step_ends_the_run_aborted_without_motion():
+    events = []
+    interrupts = Interrupts(log=events.append)
+    with interrupts.during("writing"):
+        interrupts.handle(signal.SIGINT)                      # noted, not raised: a write is going on
+    assert interrupts.count == 1 and events
+    with pytest.raises(KeyboardInterrupt):
+        interrupts.handle(signal.SIGTERM)                     # setup: nothing written yet
+    stops = []
+    with interrupts.during("motion", on_stop=lambda: stops.append(1)):
+        interrupts.handle(signal.SIGINT)
+        assert stops == [1]
+        with pytest.raises(KeyboardInterrupt):
+            interrupts.handle(signal.SIGINT)
+        interrupts.handle(signal.SIGINT)                      # a third: noted only
+    with interrupts.during("analysis"), pytest.raises(KeyboardInterrupt):
+        interrupts.handle(signal.SIGTERM)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_during_the_analysis_drops_the_analysis_and_keeps_the_run(tmp_path, sig):
+    proc = start(tmp_path)
+    wait_for(lambda: (tmp_path / "run" / "run.json").exists() or proc.poll() is not None)
+    time.sleep(0.5)
+    proc.send_signal(sig)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 3 and "Traceback" not in err, err
+    assert "analysis interrupted" in out and "tactile-analyze run=" in out
+    store_opens_closed(tmp_path / "run" / "run.zarr", "success")
+    assert not (tmp_path / "run" / "summary.json").exists()
+    assert not list((tmp_path / "run").glob(".analysis-*"))
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    root = tmp_path_factory.mktemp("recorded")
+    proc = start(root, *QUIET)
+    assert proc.wait(timeout=240) == 0
+    return root / "run" / "run.zarr"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_tactile_analyze_interrupted_says_so_and_leaves_nothing_partial(recorded, sig):
+    proc = subprocess.Popen([sys.executable, "-c", "from analysis.cli import main; main()", f"run={recorded}"],
+                            cwd=recorded.parent, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    wait_for(lambda: rundir.holder(recorded.parent) == proc.pid or proc.poll() is not None)
+    time.sleep(0.5)
+    proc.send_signal(sig)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 3 and "Traceback" not in err, err
+    assert len(err.strip().splitlines()) == 1 and "interrupted" in err
+    assert not list(recorded.parent.glob(".analysis-*")) and not (recorded.parent / "summary.json").exists()
+
+
+# ----------------------------------------------------------------------------- item 11: arm link lost
+@pytest.mark.slow
+def test_a_lost_arm_link_fails_the_run_with_its_cause_after_the_safe_stop(tmp_path):
+    proc = subprocess.run([*RUN, *QUIET, "hydra.run.dir=run", "+hardware.faults.disconnect={arm: 6.0}"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert "failed (DeviceDisconnectedError: arm: link lost" in proc.stdout
+    tree = store_opens_closed(tmp_path / "run" / "run.zarr", "failed")
+    assert "link lost" in tree.attrs["error"] and "could not start" not in tree.attrs["error"]
+    assert "error" in list(tree["events"]["kind"].values)
+    assert "link lost" in json.loads((tmp_path / "run" / "run.json").read_text())["error"]
+
+
+# ----------------------------------------------------------------------------- item 13: one writer
+@pytest.mark.slow
+def test_recover_refuses_a_run_that_is_still_recording(tmp_path):
+    proc = start(tmp_path, *QUIET, "hardware.realtime=true")
+    store = tmp_path / "run" / "run.zarr"
+    wait_for(lambda: store.exists() or proc.poll() is not None)
+    time.sleep(1.0)
+    rec = subprocess.run([sys.executable, "-c", "from protocols.recover import main; import sys; sys.exit(main())",
+                          str(store)], capture_output=True, text=True, timeout=60)
+    assert rec.returncode == 2 and f"pid {proc.pid}" in rec.stderr and "in use" in rec.stderr, rec.stderr
+    assert xr.open_datatree(store, engine="zarr").attrs["status"] == "running"
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=60) == 3
+    assert recover_main([str(store)]) == 0                      # closed by its run: nothing to do
+    store_opens_closed(store, "aborted")
+
+
+@pytest.mark.slow
+def test_a_second_tactile_run_on_the_same_directory_is_refused_and_leaves_the_first_alone(tmp_path):
+    first = start(tmp_path, *QUIET, "hardware.realtime=true", "protocol.sweep_speed=10")
+    wait_for(lambda: (tmp_path / "run" / ".hydra" / "config.yaml").exists() or first.poll() is not None)
+    second = subprocess.run([*RUN, *QUIET, "hydra.run.dir=run", "protocol.sweep_speed=20"], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=120)
+    lines = [x for x in second.stderr.splitlines() if x.strip()]
+    assert second.returncode == 2 and len(lines) == 1 and "in use by another process" in lines[0], second.stderr
+    first.send_signal(signal.SIGINT)
+    assert first.wait(timeout=60) == 3
+    assert "sweep_speed: 10.0" in (tmp_path / "run" / ".hydra" / "config.yaml").read_text()
+    assert "protocol.sweep_speed=10" in (tmp_path / "run" / ".hydra" / "overrides.yaml").read_text()
+    store_opens_closed(tmp_path / "run" / "run.zarr", "aborted")
+
+
+# ----------------------------------------------------------------------------- item 14: analysis fails
+@pytest.fixture
+def small_disk(tmp_path):
+    mount = tmp_path / "disk"
+    mount.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2900k", "tmpfs", str(mount)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("needs root to mount a small tmpfs")
+    yield mount
+    subprocess.run(["umount", "-l", str(mount)], capture_output=True)
+
+
+@pytest.mark.slow
+def test_an_analysis_that_fails_inside_tactile_run_fails_the_job_and_says_what_succeeded(tmp_path, small_disk):
+    """The 2.9 MB disk holds the recording (2.45 MB) but not its analysis."""
+    proc = subprocess.run([*RUN, f"hydra.run.dir={small_disk}/run"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert "analysis failed: [Errno 28] No space left on device" in proc.stderr
+    (line,) = [x for x in proc.stdout.splitlines() if x.startswith("run ")]
+    assert ": success, recorded; analysis failed (OSError)" in line and "tactile-analyze run=" in line
+    store_opens_closed(small_disk / "run" / "run.zarr", "success")
+    assert not list((small_disk / "run").glob(".analysis-*")) and not (small_disk / "run" / "summary.json").exists()
