@@ -74,8 +74,12 @@ def test_a_tree_of_csv_folders_imports_in_one_call_and_analyses(rest, tmp_path):
                               capture_output=True, text=True, timeout=900)
     assert analysed.returncode == 0, analysed.stderr
     assert len(list(out.rglob("summary.json"))) == len(rels)
-    take1 = json.loads((out / "bottle" / "take1" / "summary.json").read_text())
-    assert take1["headline"]["fingers_in_contact"] >= 1
+    for pressed_take in ("bottle/take1", "sponge/take1"):           # issue 12: every record, the slip fields
+        summary = json.loads((out / pressed_take / "summary.json").read_text())
+        assert summary["headline"]["fingers_in_contact"] >= 1
+        slip = summary["estimates"]["slip"]["ff"]
+        assert slip["slip_class"] in ("translation", "rotation", "none") and 0 <= slip["confidence"] <= 1
+        assert {"slip_direction_sensor_deg", "slip_displacement_mm", "rotation_deg", "evidence"} <= set(slip)
 
 
 def test_bad_files_of_a_directory_are_named_and_the_good_ones_imported(rest, tmp_path):
