@@ -7,7 +7,7 @@ i.e. stores with a ``truth`` group), ``figures/*.png``, and ``analysis_history.j
 per replaced analysis: its config, provenance and headline). Everything is written into a
 staging directory first and then renamed into place (:func:`analysis.results.swap_in`), so a
 failure leaves the previous results untouched and never partial files. The run directory is
-locked while it is analysed (``protocols.rundir``: not while the run records, not twice at
+locked while it is analysed (``runstore.rundir``: not while the run records, not twice at
 once), and what a killed analysis left behind is removed first.
 """
 
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from protocols import rundir
+from runstore import rundir
 
 from . import figures as figs
 from . import results

@@ -23,8 +23,10 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
-from . import resume, rundir
-from .app import run_app
+from cliapp.runner import run_app
+from runstore import rundir
+
+from . import resume
 from .interrupts import Interrupts
 from .run import RunResult, hand_off, run_protocol
 from .schema import check_targets, register
@@ -150,7 +152,7 @@ def main() -> None:
 
 class RunDirLock(Callback):
     """One run directory, one writer: lock ``hydra.run.dir`` (``hydra.sweep.dir`` with ``-m``)
-    before Hydra writes anything there (:mod:`protocols.rundir`); a second ``tactile-run``
+    before Hydra writes anything there (:mod:`runstore.rundir`); a second ``tactile-run``
     on the same directory is refused with one line, exit 2, leaving the first one's files alone."""
 
     def on_run_start(self, config, **kwargs) -> None:

@@ -12,7 +12,7 @@ One acquisition thread per stream polls its device's non-blocking drain method e
 ``poll_interval_s`` of the device clock (``clock.sleep``, so simulated time is respected)
 and queues the samples; a device error becomes a ``fault`` event and marks the stream
 stale, and the thread keeps retrying. A writer thread converts the queued samples to
-arrays, stamps them with the stream's clock model (:mod:`protocols.clockmodel`), appends
+arrays, stamps them with the stream's clock model (:mod:`runstore.clockmodel`), appends
 them and commits the store every ``flush_interval_s`` of wall time or :data:`RUN_FLUSH_S` of
 the run's own clock time, whichever comes first; a simulated clock faster than real time is
 held back while the last commit is :data:`MAX_BEHIND_S` behind (:meth:`Recorder.keep_up`),
@@ -39,8 +39,8 @@ import numpy as np
 from hardware.biotac import PAC_RATE_HZ
 from hardware.device import batch_times
 
-from .clockmodel import OnlineClockModel, latency_stats, sequence_gaps
-from .store import RunStore, utc_now
+from runstore import RunStore, utc_now
+from runstore.clockmodel import OnlineClockModel, latency_stats, sequence_gaps
 
 log = logging.getLogger(__name__)
 

@@ -18,9 +18,9 @@ from tqdm import tqdm
 from hardware.errors import ConfigError
 from tactile.frames import DEFAULT_VIEWS
 from tactile.geometry import load_taxels
+from runstore import RunStore, provenance, rundir, utc_now
 from tactile.pipeline import TactileModel
 
-from . import provenance, rundir
 from .calibration import session_baseline, store_baseline
 from .engine import FAILED, Outcome, RunEngine
 from .interrupts import Interrupts
@@ -30,7 +30,6 @@ from .live import (LiveConfig, LiveMonitor, live_fingers, live_settings, open_vi
 from .plan import Plan, format_timeline, make_plan
 from .recorder import Recorder
 from .steps import ProtocolError
-from .store import RunStore, utc_now
 
 ANALYSIS_ENTRY_POINTS = "tactile_flow.analysis"
 

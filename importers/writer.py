@@ -1,7 +1,7 @@
 """Write a file's :class:`~.recording.Recording` chunks as a run store (``run.zarr`` + ``run.json``), atomically.
 
 The store has the layout of a recorded run (``docs/run_store.md``), written through
-:class:`protocols.store.RunStore` with the recorder's column layout, so ``tactile-analyze``
+:class:`runstore.RunStore` with the recorder's column layout, so ``tactile-analyze``
 reads it like any run:
 
 - ``biotac``: ``time`` (s since the first frame, from the clock model of ``device_time``
@@ -41,10 +41,10 @@ import zarr
 
 from hardware.biotac import COUNTS_MAX, PAC_RATE_HZ
 from hardware.device import batch_times
-from protocols import rundir
-from protocols.clockmodel import ClockFit, latency_stats, sequence_gaps
-from protocols.provenance import write_run_json
-from protocols.store import RunStore, jsonable
+from runstore import rundir
+from runstore.clockmodel import ClockFit, latency_stats, sequence_gaps
+from runstore.provenance import write_run_json
+from runstore import RunStore, jsonable
 
 from .baseline import Baseline
 from .recording import ImportInputError, Prepared, Recording, diffs, median_of, rate_of
@@ -154,7 +154,7 @@ def write_store(prepared: Prepared, store_path: Path, provenance: dict, import_a
 
     Args:
         prepared: the file after the first pass (reader, scan, fingers kept).
-        provenance: :func:`protocols.provenance.collect` output (plus ``source``, ``importer``).
+        provenance: :func:`runstore.provenance.collect` output (plus ``source``, ``importer``).
         import_attrs: the root attribute ``import`` (source, checksum, finger decision...);
             its ``rate_hz`` is set here, from the stored times.
         baseline: an unloaded baseline from elsewhere, or ``None``.
@@ -270,7 +270,7 @@ STAGING_MARK = ".importing-"
 
 def staging_dir(target: Path) -> Path:
     """A fresh hidden directory beside ``target`` (same filesystem, so the rename is atomic),
-    locked by this process (:mod:`protocols.rundir`) until :func:`release_staging`, so that
+    locked by this process (:mod:`runstore.rundir`) until :func:`release_staging`, so that
     :func:`remove_stale_staging` can tell a live import's staging from a killed one's."""
     target.parent.mkdir(parents=True, exist_ok=True)
     path = Path(tempfile.mkdtemp(prefix=f".{target.name}{STAGING_MARK}", dir=target.parent))

@@ -1,7 +1,7 @@
 """Provenance of a run: what ran, from which code, on which machine and hardware.
 
 :func:`collect` gathers it once at the start (JSON-serialisable values only); the engine
-passes it to :meth:`protocols.store.RunStore.create` (root attribute ``provenance``) and
+passes it to :meth:`runstore.writer.RunStore.create` (root attribute ``provenance``) and
 :func:`write_run_json` writes it, with the exit status and end time, to ``run.json`` beside
 the store — atomically, so a reader never sees a half-written file.
 """
@@ -20,7 +20,8 @@ import tempfile
 import uuid
 from pathlib import Path
 
-from .store import SCHEMA_VERSION, jsonable, utc_now
+from .jsonvalues import jsonable, utc_now
+from .schema import SCHEMA_VERSION
 
 UNKNOWN = "unknown"
 PROJECT_ROOT = Path(__file__).resolve().parent.parent

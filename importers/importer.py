@@ -22,8 +22,8 @@ import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from protocols.clockmodel import OnlineClockModel
-from protocols.provenance import collect
+from runstore.clockmodel import OnlineClockModel
+from runstore.provenance import collect
 
 from .bag import TOPIC, BagFile
 from .baseline import Baseline, EarlyWindow, estimate_baseline, load_calibration
@@ -94,7 +94,7 @@ def scan(reader: Reader, early_s: float = 1.0, frames: int = CHUNK_FRAMES) -> Sc
     """The first pass over a file: read (and so check) every frame, chunk by chunk, keeping
     only the frame count, the unconnected-finger test (:class:`.recording.Connectivity`),
     the early window (:class:`.baseline.EarlyWindow`, ``early_s`` s) and the clock model of
-    device against host time (:class:`protocols.clockmodel.OnlineClockModel`, one point per
+    device against host time (:class:`runstore.clockmodel.OnlineClockModel`, one point per
     1 s window). Memory: one chunk of ``frames`` frames (plus the early window, at most as
     much), and one clock-model point (~0.2 kB) per second recorded."""
     conn, early, clock = None, EarlyWindow(early_s, frames), OnlineClockModel(window_s=1.0)
@@ -279,7 +279,7 @@ def run_metadata(src: Source, prepared: Prepared, baseline: Baseline | None, con
 
     ``import``: source path, ``sha256``, bytes and files, ``importer``, what the reader found,
     the finger decision, frames, rate (Hz; ``None`` here, set by the writer from the stored
-    times), channels. Provenance: :func:`protocols.provenance.collect` plus ``source`` (path,
+    times), channels. Provenance: :func:`runstore.provenance.collect` plus ``source`` (path,
     sha256, bytes, files, format) and ``importer``.
     """
     summ = checksum(src)
@@ -307,7 +307,7 @@ def _importer(src: Source) -> dict:
             return importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
             return "unknown"
-    fn = "protocols.importers.bag.read_bag" if src.kind == "bag" else "protocols.importers.csv.read_csv"
+    fn = "importers.bag.read_bag" if src.kind == "bag" else "importers.csv.read_csv"
     out = {"name": "tactile-import", "reader": fn, "tactile-flow": version("tactile-flow")}
     if src.kind == "bag":
         out["rosbags"] = version("rosbags")

@@ -9,7 +9,7 @@ line and column; nothing written; for a directory: the good files are imported a
 bad one gets its line), 1 other failure. A truncated bag imports what it holds
 (exit 0) and its output line ends with ``WARNING: truncated bag: ...``. Files are streamed:
 memory does not grow with their length (``docs/import.md``). ``verbose=true`` adds the
-traceback. The work is :func:`protocols.importers.import_source`.
+traceback. The work is :func:`importers.import_source`.
 """
 
 from __future__ import annotations
@@ -22,12 +22,12 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import OmegaConf
 
-from protocols.app import run_app
+from cliapp.runner import run_app
 
 from .importer import ImportIncomplete, ImportSettings, import_source
 from .recording import ImportInputError
 
-CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 BAD_INPUT, FAILED = 2, 1
 _exit = {"code": 0}
 

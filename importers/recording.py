@@ -21,7 +21,7 @@ import numpy as np
 
 from hardware.biotac import FINGERS, N_TAXELS
 from hardware.errors import RATE_RANGE_HZ, brief
-from protocols.clockmodel import ClockFit
+from runstore.clockmodel import ClockFit
 
 #: relative disagreement allowed between ``rate_hz`` and the rate of a file's own timestamps
 RATE_TOLERANCE = 0.02

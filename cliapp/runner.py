@@ -1,6 +1,6 @@
 """Running this project's Hydra apps (``tactile-run``, ``tactile-analyze``, ``tactile-import``).
 
-:func:`run_app` puts the config guard (:mod:`protocols.config_guard`) in front of Hydra and
+:func:`run_app` puts the config guard (:mod:`cliapp.config_guard`) in front of Hydra and
 turns what Hydra or the guard refuses into one line and exit status 2, and a stray Ctrl-C or
 SIGTERM into one line and exit status 3.
 """

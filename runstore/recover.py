@@ -34,9 +34,9 @@ from hardware.errors import brief
 
 from . import rundir
 from .provenance import write_run_json
-from .store import remove_debris, utc_now
-
-TIME_COORDS = ("time", "time_pac", "time_arm", "time_hand", "time_pump", "time_scale")
+from .jsonvalues import utc_now
+from .schema import TIME_COORDS
+from .writer import remove_debris
 
 
 def recover(path) -> dict:
