@@ -12,9 +12,11 @@ import signal
 import sys
 import traceback
 
+from runstore.status import ExitCode
+
 from .config_guard import install
 
-BAD_INPUT, INTERRUPTED = 2, 3
+BAD_INPUT, INTERRUPTED = ExitCode.BAD_INPUT, ExitCode.INTERRUPTED
 
 
 def run_app(app, argv=None) -> None:

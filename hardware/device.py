@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -88,6 +88,17 @@ class Device(ABC):
 
     #: short name used in error messages and fault configs ("arm", "hand", "biotac", ...)
     kind: str = "device"
+    #: the type of the samples it records, whose ``describe()`` declares their columns
+    sample_type: ClassVar[type | None] = None
+
+    def describe(self) -> tuple:
+        """The streams this device records (:class:`hardware.streams.Stream`), as its sample
+        type declares them; none for a device that records nothing."""
+        return self.sample_type.describe() if self.sample_type is not None else ()
+
+    def read_samples(self) -> list:
+        """Every sample received since the last call; never blocks (the recorder's source)."""
+        return self.read_states()
 
     @abstractmethod
     def connect(self) -> None:

@@ -23,12 +23,13 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import OmegaConf
 
 from cliapp.runner import run_app
+from runstore.status import ExitCode
 
 from .importer import ImportIncomplete, ImportSettings, import_source
 from .recording import ImportInputError
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
-BAD_INPUT, FAILED = 2, 1
+BAD_INPUT, FAILED = ExitCode.BAD_INPUT, ExitCode.FAILED
 _exit = {"code": 0}
 
 

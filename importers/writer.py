@@ -29,7 +29,6 @@ renamed into place by :func:`publish` once every store of the import is complete
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import tempfile
@@ -41,10 +40,11 @@ import zarr
 
 from hardware.biotac import COUNTS_MAX, PAC_RATE_HZ
 from hardware.device import batch_times
-from runstore import rundir
+from hardware.streams import as_dtype
+from runstore import RunStore, rundir
 from runstore.clockmodel import ClockFit, latency_stats, sequence_gaps
 from runstore.provenance import write_run_json
-from runstore import RunStore, jsonable
+from runstore.layout import event_columns
 
 from .baseline import Baseline
 from .recording import ImportInputError, Prepared, Recording, diffs, median_of, rate_of
@@ -66,13 +66,10 @@ def time_base(clock: ClockFit | None, t0: float):
     return lambda x: clock(x) - t0
 
 
-_I16 = np.iinfo(np.int16)
-
-
 def _i16(a) -> np.ndarray:
     """Counts as int16, values beyond int16 clipped (as the recorder stores them; only frames
     flagged ``valid = False`` have any)."""
-    return np.clip(np.asarray(a), _I16.min, _I16.max).astype(np.int16)
+    return as_dtype(a, np.int16)
 
 
 def _in_range(a: np.ndarray, axes) -> np.ndarray:
@@ -104,7 +101,7 @@ def pac_block(rec: Recording, to_run, host_t0: float, rate_hz: float = PAC_RATE_
     """``biotac_pac`` columns of a chunk with PAC: (M, F) int16 ``pac`` and (M,) ``time_pac``,
     ``device_time``, ``host_time`` (s). A frame's n samples end at its timestamp, 1/rate apart
     (closer when the frame follows the one before sooner than that), strictly increasing, as
-    :func:`protocols.recorder.pac_columns`; ``previous``: the last PAC device time before the chunk."""
+    :func:`hardware.biotac.pac_columns`; ``previous``: the last PAC device time before the chunk."""
     counts = np.array([p.shape[1] for p in rec.pac], np.int64)                  # (N,)
     pac = np.concatenate([p.T for p in rec.pac]) if len(rec.pac) else np.zeros((0, len(rec.fingers)))
     device = batch_times(rec.device_time, counts, 1.0 / rate_hz, previous)
@@ -112,14 +109,6 @@ def pac_block(rec: Recording, to_run, host_t0: float, rate_hz: float = PAC_RATE_
             else np.full(len(device), np.nan))
     return {"time_pac": to_run(device) if len(device) else np.zeros(0), "device_time": device,
             "host_time": host - host_t0, "pac": _i16(pac)}
-
-
-def event_block(rows: list[tuple]) -> dict:
-    """``events`` columns of ``(time s, kind, name, detail dict)`` rows (detail as JSON text)."""
-    return {"time": np.array([r[0] for r in rows], float),
-            "kind": np.array([r[1] for r in rows], dtype=object),
-            "name": np.array([r[2] for r in rows], dtype=object),
-            "detail": np.array([json.dumps(jsonable(r[3])) for r in rows], dtype=object)}
 
 
 def gap_events(seq: np.ndarray, time: np.ndarray, last_seq: int | None, last_time: float | None) -> list[tuple]:
@@ -210,7 +199,7 @@ def _append_chunks(store: RunStore, prepared: Prepared, to_run, host_t0: float, 
     samples = gaps = missing = invalid = 0
     last_seq = last_time = last_pac = None
     sample_d, sample_h = [], []
-    store.append("events", event_block([(0.0, "info", "import", import_detail)]))
+    store.append("events", event_columns([(0.0, "info", "import", import_detail)]))
     for chunk in prepared.chunks():
         bio = biotac_block(chunk, to_run, host_t0)
         blocks = {"biotac": bio}
@@ -220,7 +209,7 @@ def _append_chunks(store: RunStore, prepared: Prepared, to_run, host_t0: float, 
                 last_pac = float(blocks["biotac_pac"]["device_time"][-1])
         events = gap_events(bio["seq"], bio["time"], last_seq, last_time)
         if events:
-            blocks["events"] = event_block(events)
+            blocks["events"] = event_columns(events)
         store.append_many(blocks)
         gaps += sum(e[3]["missing"] > 0 for e in events)
         missing += sum(e[3]["missing"] for e in events if e[3]["missing"] > 0)

@@ -24,7 +24,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
 from cliapp.runner import run_app
-from runstore import rundir
+from runstore import RunStatus, rundir
 
 from . import resume
 from .interrupts import Interrupts
@@ -33,7 +33,7 @@ from .schema import check_targets, register
 
 log = logging.getLogger("tactile-run")
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
-EXIT_CODES = {"success": 0, "planned": 0, "failed": 1, "aborted": 3}
+EXIT_CODES = {s.value: int(s.exit_code) for s in RunStatus}
 BAD_INPUT = 2
 _exit = {"code": 0}
 

@@ -16,8 +16,8 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from hardware.errors import brief
-from hardware.sim.geometry import rotvec_to_matrix
-from hardware.sim.surfaces import Surface, load_surface
+from hardware.transforms import rotvec_to_matrix
+from hardware.surfaces import Surface, load_surface
 from tactile.geometry import fit_ellipsoid, load_taxels
 
 from .steps import Criterion, ProtocolError, Repeat, Step, parse_steps

@@ -66,7 +66,6 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
 
     lab = make_lab(cfg)
     baseline = session_baseline(cfg.hardware, lab)
-    stage = getattr(lab, "stage", None)
     own = interrupts is None
     interrupts = interrupts or Interrupts(console)
     store_path = run_dir / "run.zarr"
@@ -79,15 +78,11 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
                                     attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
                                            "tare": bool(cfg.protocol.get("tare", True))},
                                     live=(live_fingers(live, lab.biotac.fingers), model.config.views)
-                                    if model else None, stage=stage is not None)
+                                    if model else None, streams=lab.streams())
             stored = store_baseline(store, baseline, lab.biotac.fingers)
             if getattr(lab, "truth", None) is not None:
                 lab.truth.conditions = _conditions(cfg, lab, stored, plan)
-            sources = {"biotac": lab.biotac.read, "arm": lab.arm.read_states, "hand": lab.hand.read_states,
-                       "pump": lab.pump.read_states, "scale": lab.scale.read}
-            if stage is not None:
-                sources["stage"] = stage.read_states
-            recorder = Recorder(store, sources, lab.clock)
+            recorder = Recorder(store, lab.sources(), lab.clock)
             monitor, outcome = None, Outcome(FAILED, "the run engine could not start")
             try:
                 if not plan.setup:

@@ -21,7 +21,7 @@ import uuid
 from pathlib import Path
 
 from .jsonvalues import jsonable, utc_now
-from .schema import SCHEMA_VERSION
+from .layout import SCHEMA_VERSION
 
 UNKNOWN = "unknown"
 PROJECT_ROOT = Path(__file__).resolve().parent.parent

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .schema import SCHEMA_VERSION
+from .layout import SCHEMA_VERSION
 
 
 class StoreVersionError(ValueError):
@@ -18,7 +18,7 @@ class StoreVersionError(ValueError):
 
 def check_version(attrs, where="run store") -> str:
     """The store's ``schema_version`` (root attribute); ``StoreVersionError`` if its major
-    version is newer than :data:`~runstore.schema.SCHEMA_VERSION`'s. Stores older than the
+    version is newer than :data:`~runstore.layout.SCHEMA_VERSION`'s. Stores older than the
     attribute (none known) count as 1.0."""
     version = str(attrs.get("schema_version") or "1.0")
     major = version.split(".", 1)[0]

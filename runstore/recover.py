@@ -35,7 +35,6 @@ from hardware.errors import brief
 from . import rundir
 from .provenance import write_run_json
 from .jsonvalues import utc_now
-from .schema import TIME_COORDS
 from .writer import remove_debris
 
 
@@ -76,7 +75,7 @@ def _recover(path: Path) -> dict:
             if live.shape != arr.shape:
                 trimmed[name] = int(live.shape[0] - arr.shape[0])
                 live.resize(arr.shape)
-            if name.rsplit("/", 1)[-1] in TIME_COORDS and arr.shape[0]:
+            if _is_time_coord(name, arr) and arr.shape[0]:
                 try:
                     end = max(end, float(np.asarray(arr[-1])))
                 except Exception as exc:        # noqa: BLE001 - a chunk that does not decode
@@ -92,6 +91,13 @@ def _recover(path: Path) -> dict:
                    extra={"store": path.name, "recovered": True, "last_sample_s": end})
     return {"path": str(path), "status": "crashed", "last_sample_s": end, "trimmed": trimmed,
             "dropped_unpublished": unpublished, "action": "recovered", **({"removed": debris} if debris else {})}
+
+
+def _is_time_coord(name: str, arr) -> bool:
+    """Whether ``arr`` is a stream's time coordinate: its own (only) dimension, in seconds —
+    known from the store itself, so streams added later are covered (:data:`~runstore.layout.TIME_COORDS`)."""
+    leaf = name.rsplit("/", 1)[-1]
+    return tuple(arr.metadata.dimension_names or ()) == (leaf,) and arr.attrs.get("units") == "s"
 
 
 def _drop_unpublished(path: Path, published: set[str]) -> list[str]:

@@ -1,7 +1,7 @@
 """The run store's writer, :class:`RunStore`, and its commit protocol (``docs/run_store.md``).
 
 One zarr v3 hierarchy per run (``run.zarr``), read as one ``xarray.DataTree``
-(:func:`runstore.reader.open_run`). Layout and units: :func:`runstore.schema.run_schema`.
+(:func:`runstore.reader.open_run`). Layout and units: :func:`runstore.layout.run_schema`.
 Every variable carries CF-style ``units`` and ``long_name`` attributes and names its
 dimensions through zarr v3 ``dimension_names``.
 
@@ -35,7 +35,7 @@ import zarr
 from hardware.biotac import FINGERS
 
 from .jsonvalues import jsonable, utc_now
-from .schema import SCHEMA_VERSION, STATUSES, Block, dim_sizes, fixed_coords, run_schema
+from .layout import SCHEMA_VERSION, STATUSES, Block, dim_sizes, fixed_coords, lab_streams, run_schema
 
 
 def _zarr_dtype(dtype: str):
@@ -54,10 +54,12 @@ class RunStore:
     sets the final status and end time.
     """
 
-    def __init__(self, path: Path, root: zarr.Group, schema: dict[str, Block], fingers: tuple[str, ...]):
+    def __init__(self, path: Path, root: zarr.Group, schema: dict[str, Block], fingers: tuple[str, ...],
+                 streams: dict | None = None):
         self.path = Path(path)
         self.schema = schema
         self.fingers = fingers
+        self.streams = dict(streams or {})      # name -> hardware.streams.Stream: what the recorder fills
         self._root = root
         self._lock = threading.RLock()
         self._arrays = {b: {v.name: root[f"{blk.group}/{v.name}"] for v in blk.vars}
@@ -72,12 +74,15 @@ class RunStore:
     @classmethod
     def create(cls, path, *, protocol: str, fingers=FINGERS, run_id: str | None = None,
                provenance: dict | None = None, attrs: dict | None = None,
-               chunk_s: float = 5.0, live: tuple | None = None, stage: bool = False) -> "RunStore":
+               chunk_s: float = 5.0, live: tuple | None = None, stage: bool = False,
+               streams: dict | None = None) -> "RunStore":
         """Create ``path`` (must not exist) with every group, coordinate and empty variable,
         root attributes (``run_id``, ``protocol``, ``status="running"``, ``start_time``,
         ``schema_version``, ``provenance``) and commit it. ``live``: ``(fingers, views)``
-        of the online tactile flow, to add the ``live`` group; ``stage``: add the object
-        stage's ``stage`` group.
+        of the online tactile flow, to add the ``live`` group. ``streams``: the device
+        streams it records (name → :class:`hardware.streams.Stream`, as the sample types'
+        ``describe()`` declare them); by default the lab's
+        (:func:`~runstore.layout.lab_streams` of ``fingers``, with ``stage`` the object stage's).
 
         Atomic: everything is made in a hidden directory beside ``path`` and renamed into
         place, so an interrupted creation leaves no half-made store (at most the hidden
@@ -86,7 +91,8 @@ class RunStore:
         if path.exists():
             raise FileExistsError(f"run store {path} already exists")
         fingers = tuple(fingers)
-        schema = run_schema(chunk_s, live=bool(live), stage=stage)
+        streams = lab_streams(fingers, stage) if streams is None else dict(streams)
+        schema = run_schema(chunk_s, live=bool(live), streams=streams)
         prov = provenance or {}
         root_attrs = jsonable(dict(run_id=run_id or prov.get("run_id") or str(uuid.uuid4()), protocol=protocol,
                                    status="running", start_time=prov.get("start_time") or utc_now(), end_time=None,
@@ -94,14 +100,14 @@ class RunStore:
                                    **(attrs or {})))
         tmp = path.with_name(f".{path.name}.creating-{uuid.uuid4().hex[:8]}")
         try:
-            _make_tree(tmp, schema, fingers, live, root_attrs)
+            _make_tree(tmp, schema, fixed_coords(streams, live), root_attrs)
             if path.exists():
                 raise FileExistsError(f"run store {path} already exists")
             os.rename(tmp, path)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
-        store = cls(path, zarr.open_group(str(path), mode="r+", use_consolidated=False), schema, fingers)
+        store = cls(path, zarr.open_group(str(path), mode="r+", use_consolidated=False), schema, fingers, streams)
         store._attrs = dict(root_attrs)
         store.n_commits = 1
         return store
@@ -270,12 +276,11 @@ class RunStore:
             self.closed = True
 
 
-def _make_tree(path: Path, schema: dict[str, Block], fingers: tuple[str, ...], live, attrs: dict) -> None:
-    """Every group, coordinate and empty variable of a new store at ``path``, with the root
-    ``attrs``, consolidated (the first commit)."""
-    sizes = dim_sizes(fingers, live)
+def _make_tree(path: Path, schema: dict[str, Block], coords: dict, attrs: dict) -> None:
+    """Every group, coordinate (``coords``: :func:`~runstore.layout.fixed_coords`) and empty
+    variable of a new store at ``path``, with the root ``attrs``, consolidated (the first commit)."""
+    sizes = dim_sizes(coords)
     root = zarr.open_group(str(path), mode="w-", zarr_format=3)
-    coords = fixed_coords(fingers, live)
     for group in dict.fromkeys(b.group for b in schema.values()):
         g = root.create_group(group)
         for name, (values, units, long_name) in coords.get(group, {}).items():
