@@ -9,6 +9,7 @@ in m/s².
 
 from __future__ import annotations
 
+import math
 from abc import abstractmethod
 from dataclasses import dataclass, field
 
@@ -56,6 +57,20 @@ class ArmState:
                    "force [Fx, Fy, Fz] N and torque [Tx, Ty, Tz] N m on the tool, base frame"),
             Column("protective_stopped", ("time_arm",), "bool", "1", "controller protective-stop flag")),
                        coords=(Coord("axis6", AXIS6, "", "pose / twist / wrench component"),)),)
+
+
+def trapezoid_time(distance: float, speed: float, accel: float) -> float:
+    """Duration (s) of a rest-to-rest move of ``distance`` (m or rad) at most ``speed`` (per s)
+    and ``accel`` (per s²): a trapezoidal speed profile, triangular when too short to reach ``speed``.
+
+    >>> trapezoid_time(0.1, 0.05, 0.5)           # 2 s cruising + 0.1 s ramping
+    2.1
+    """
+    if distance <= 0:
+        return 0.0
+    if distance < speed ** 2 / accel:
+        return 2.0 * math.sqrt(distance / accel)
+    return distance / speed + speed / accel
 
 
 @dataclass

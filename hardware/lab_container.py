@@ -18,7 +18,6 @@ from typing import TYPE_CHECKING, Any
 from .arm import Arm
 from .biotac import TactileSensors
 from .device import Clock
-from .errors import DeviceError
 from .hand import Hand
 from .pour import Pump, Scale
 from .stage import ObjectStage
@@ -27,14 +26,6 @@ if TYPE_CHECKING:                  # (hardware.surfaces still builds on the simu
     from .surfaces import Surface
 
 log = logging.getLogger(__name__)
-
-
-class LabConnectError(DeviceError):
-    """Several devices failed to connect; ``failures`` maps each device to its error."""
-
-    def __init__(self, failures: dict[str, BaseException]):
-        self.failures = failures
-        super().__init__("; ".join(f"{name}: {type(e).__name__}: {e}" for name, e in failures.items()))
 
 
 @dataclass
@@ -63,8 +54,9 @@ class Lab:
 
     def connect(self) -> None:
         """Connect every device. Each is tried, so every failure is reported, not only the
-        first: if any fails, every device is closed again and the one error is raised (or a
-        :class:`LabConnectError` naming each failed device)."""
+        first: each is logged, and if any fails every device is closed again and the first
+        device's error is raised (its type kept for the caller), its message extended with
+        every other failure and ``failures`` mapping each failed device to its error."""
         failures = {}
         try:
             for name, device in self.devices.items():
@@ -78,9 +70,12 @@ class Lab:
             raise
         if failures:
             self.close()
-            if len(failures) == 1:
-                raise next(iter(failures.values()))
-            raise LabConnectError(failures)
+            first = next(iter(failures.values()))
+            if len(failures) > 1:
+                others = "; ".join(f"{name}: {type(e).__name__}: {e}" for name, e in list(failures.items())[1:])
+                first.args = (f"{first}; also failed to connect: {others}",)
+            first.failures = failures
+            raise first
 
     def close(self) -> None:
         for name, device in self.devices.items():

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .arm import Arm, ArmState, Workspace
+from .arm import Arm, ArmState, Workspace, trapezoid_time
 from .device import DeviceIdentity, WallClock
 from .errors import (ConfigError, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
                      EmergencyStopError, NotConnectedError, ProtectiveStopError, SafetyError)
@@ -402,7 +402,7 @@ class UR10Arm(Arm):
         self._mode = "move"
         if not asynchronous:
             dist = float(np.linalg.norm(target[:3] - start[:3]))
-            self.wait_until_stopped(_trapezoid_duration(dist, speed, accel) + self.cfg.move_timeout_margin_s)
+            self.wait_until_stopped(trapezoid_time(dist, speed, accel) + self.cfg.move_timeout_margin_s)
 
     def wait_until_stopped(self, timeout_s: float | None = None) -> None:
         """Block until the current motion ends (typed errors on a stop or a lost link)."""
@@ -608,13 +608,6 @@ class UR10Arm(Arm):
             if time.monotonic() >= end:
                 return False
             time.sleep(0.01)
-
-
-def _trapezoid_duration(distance: float, speed: float, accel: float) -> float:
-    """Time (s) to travel ``distance`` m from rest to rest at ``speed`` m/s, ``accel`` m/s²."""
-    if distance <= speed * speed / accel:
-        return 2 * math.sqrt(distance / accel)
-    return distance / speed + speed / accel
 
 
 def _ur_rtde_version() -> str:

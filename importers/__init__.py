@@ -8,7 +8,7 @@ Files are streamed: read twice in chunks of :data:`.recording.CHUNK_FRAMES` fram
 checking pass, a writing pass), so memory does not grow with their length.
 
 Modules: :mod:`.recording` (the format-neutral :class:`Recording` chunk, unconnected-finger
-detection, exact medians of long data), :mod:`.bag` and :mod:`.csv` (chunk readers
+detection, exact medians of long data), :mod:`.bag` (on :mod:`.ros1`, a ROS1 record reader) and :mod:`.csv` (chunk readers
 :class:`BagFile`, :class:`CsvFile`; truncated bags, garbage rows), :mod:`.baseline`
 (calibration files and import-wide estimates), :mod:`.sources` (what a path holds,
 checksums), :mod:`.writer` (run store + run.json, streamed; staging and atomic rename),

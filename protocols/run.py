@@ -24,7 +24,7 @@ from tactile.pipeline import TactileModel
 from .calibration import session_baseline, store_baseline
 from .engine import FAILED, Outcome, RunEngine
 from .interrupts import Interrupts
-from .lab import check_hardware, make_lab
+from .backends import check_hardware, make_lab
 from .live import (LiveConfig, LiveMonitor, live_fingers, live_settings, open_viewer, tactile_config, terminal_display,
                    viewer_names, warm_up)
 from .plan import Plan, format_timeline, make_plan

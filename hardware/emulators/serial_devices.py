@@ -35,7 +35,7 @@ import numpy as np
 from ..biotac import FINGERS
 from ..serial_biotac import encode_frame
 from ..serial_pour import format_weight_line
-from .cli import EmulatorProcess
+from .process import EmulatorProcess
 
 FIRMWARE = "2.4-emulated"
 
