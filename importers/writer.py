@@ -41,7 +41,7 @@ import zarr
 from hardware.biotac import COUNTS_MAX, PAC_RATE_HZ
 from hardware.device import batch_times
 from hardware.streams import as_dtype
-from runstore import RunStore, rundir
+from runstore import RunStatus, RunStore, rundir
 from runstore.clockmodel import ClockFit, latency_stats, sequence_gaps
 from runstore.provenance import write_run_json
 from runstore.layout import event_columns
@@ -182,10 +182,10 @@ def write_store(prepared: Prepared, store_path: Path, provenance: dict, import_a
                   "t0_clock": "host (bag record time)" if has_host else "device (file time)"}
         store.set_attrs(**{"import": import_attrs})
         store.set_group_attrs("biotac", stream=stream, source_channels=list(scan.channels))
-        store.close("success", streams={"biotac": stream})
+        store.close(RunStatus.SUCCESS, streams={"biotac": stream})
     finally:
         if not store.closed:
-            store.close("failed")
+            store.close(RunStatus.FAILED)
     absent = [c for c in OPTIONAL if c not in scan.channels]
     _finish_biotac_group(store_path, absent, baseline.counts(fingers) if baseline else None, baseline_attrs)
     return {**stream, "t0": scan.t0, "rate_hz": rate}
@@ -289,7 +289,7 @@ def write_run(prepared: Prepared, staging: Path, provenance: dict, import_attrs:
     """``staging/run.zarr`` (:func:`write_store`) and ``staging/run.json`` (provenance + status
     ``success``). Returns :func:`write_store`'s summary."""
     summary = write_store(prepared, staging / "run.zarr", provenance, import_attrs, baseline)
-    write_run_json(staging / "run.json", provenance, "success",
+    write_run_json(staging / "run.json", provenance, RunStatus.SUCCESS,
                    extra={"import": import_attrs, "baseline": (baseline.to_attrs(prepared.fingers) if baseline
                                                                else {"method": "none"})})
     return summary

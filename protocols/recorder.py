@@ -36,7 +36,7 @@ from typing import Callable
 import numpy as np
 
 
-from runstore import RunStore, utc_now
+from runstore import RunStatus, RunStore, utc_now
 from runstore.clockmodel import OnlineClockModel, latency_stats, sequence_gaps
 from runstore.layout import event_columns
 
@@ -140,7 +140,7 @@ class Recorder:
         self._writer.start()
         return self
 
-    def stop(self, status: str = "success", truth: dict | None = None, attrs: dict | None = None) -> dict:
+    def stop(self, status: str = RunStatus.SUCCESS, truth: dict | None = None, attrs: dict | None = None) -> dict:
         """Drain every source, flush, refit the clock models, rewrite the time coordinates,
         write ``truth`` (the simulator's ground truth, if given) and close the store with
         ``status`` and ``attrs``. Returns :meth:`stats`. Idempotent.
@@ -180,7 +180,7 @@ class Recorder:
                 "time_base": "simulated clock (s); subtract the root attribute t0_clock_s for time since run start"}))
         attrs = dict(attrs or {})
         if errors:
-            status = "failed"
+            status = RunStatus.FAILED
             attrs["recorder_error"] = f"{type(errors[0]).__name__}: {errors[0]}"
             attrs["error"] = "; ".join(filter(None, [f"recording failed: {attrs['recorder_error']}",
                                                      attrs.get("error")]))
@@ -197,11 +197,11 @@ class Recorder:
         if self.stopped:
             return
         if exc_type is None:
-            self.stop("success")
+            self.stop(RunStatus.SUCCESS)
         else:
             if exc is not None:
                 self.event("fault", "exception", {"type": exc_type.__name__, "message": str(exc)})
-            self.stop("aborted" if issubclass(exc_type, KeyboardInterrupt) else "failed")
+            self.stop(RunStatus.ABORTED if issubclass(exc_type, KeyboardInterrupt) else RunStatus.FAILED)
 
     # ------------------------------------------------------------------ engine API
     def now(self) -> float:

@@ -35,6 +35,7 @@ from hardware.errors import brief
 from . import rundir
 from .provenance import write_run_json
 from .jsonvalues import utc_now
+from .status import RunStatus
 from .writer import remove_debris
 
 
@@ -64,7 +65,7 @@ def _recover(path: Path) -> dict:
         if status is None or run_id is None:
             raise ValueError(f"{path}: not a run store (no run_id/status attributes)")
         debris = [p.name for p in remove_debris(path.parent)]
-        if status != "running":
+        if status != RunStatus.RUNNING:
             written = _run_json_of_closed(path, committed.attrs)
             return {"path": str(path), "status": status, "action": "none: the run was closed",
                     **({"run_json": "written"} if written else {}), **({"removed": debris} if debris else {})}
@@ -82,14 +83,14 @@ def _recover(path: Path) -> dict:
                     raise ValueError(f"{path}/{name}: its last chunk cannot be read ({type(exc).__name__}: "
                                      f"{brief(str(exc), 120)}); the store is damaged") from None
         unpublished = _drop_unpublished(path, set(names) | set(_groups(committed)))
-        attrs = {"status": "crashed", "end_time": utc_now(), "recovered": True, "last_sample_s": end}
+        attrs = {"status": RunStatus.CRASHED, "end_time": utc_now(), "recovered": True, "last_sample_s": end}
         zarr.open_group(str(path), mode="r+", use_consolidated=True).update_attributes(attrs)
         zarr.consolidate_metadata(str(path))
     provenance = dict(committed.attrs.get("provenance") or {})
     provenance.setdefault("run_id", run_id)
-    write_run_json(path.parent / "run.json", provenance, status="crashed", end_time=attrs["end_time"],
+    write_run_json(path.parent / "run.json", provenance, status=RunStatus.CRASHED, end_time=attrs["end_time"],
                    extra={"store": path.name, "recovered": True, "last_sample_s": end})
-    return {"path": str(path), "status": "crashed", "last_sample_s": end, "trimmed": trimmed,
+    return {"path": str(path), "status": RunStatus.CRASHED, "last_sample_s": end, "trimmed": trimmed,
             "dropped_unpublished": unpublished, "action": "recovered", **({"removed": debris} if debris else {})}
 
 

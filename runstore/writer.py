@@ -35,6 +35,7 @@ import zarr
 from hardware.biotac import FINGERS
 
 from .jsonvalues import jsonable, utc_now
+from .status import RunStatus
 from .layout import SCHEMA_VERSION, STATUSES, Block, dim_sizes, fixed_coords, lab_streams, run_schema
 
 
@@ -95,7 +96,7 @@ class RunStore:
         schema = run_schema(chunk_s, live=bool(live), streams=streams)
         prov = provenance or {}
         root_attrs = jsonable(dict(run_id=run_id or prov.get("run_id") or str(uuid.uuid4()), protocol=protocol,
-                                   status="running", start_time=prov.get("start_time") or utc_now(), end_time=None,
+                                   status=RunStatus.RUNNING, start_time=prov.get("start_time") or utc_now(), end_time=None,
                                    schema_version=SCHEMA_VERSION, fingers=list(fingers), provenance=prov,
                                    **(attrs or {})))
         tmp = path.with_name(f".{path.name}.creating-{uuid.uuid4().hex[:8]}")
