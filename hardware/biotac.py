@@ -8,16 +8,14 @@ and PAC (dynamic pressure, vibration) at 2.2 kHz, delivered in batches with each
 
 from __future__ import annotations
 
-import threading
 from abc import abstractmethod
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from tactile import FINGERS, N_TAXELS  # noqa: F401  (Shadow finger order; taxels per sensor)
 
-from .device import Device, batch_times
+from .device import Device, SampleBuffer, batch_times
 from .streams import Column, Coord, Stream, as_dtype, device_time
 from .errors import ConfigError
 
@@ -120,30 +118,9 @@ def pac_columns(frames, previous: float | None = None, rate_hz: float = PAC_RATE
             "host_time": np.repeat(np.array([f.host_time for f in frames], float), counts)}
 
 
-class FrameTap:
-    """A second, independent copy of a sensor's frame stream (see :meth:`TactileSensors.tap`).
-
-    Bounded: it keeps the newest ``maxlen`` frames and counts the ones it had to drop
-    (``overflows``), so a consumer that stalls can never grow memory.
-    """
-
-    def __init__(self, maxlen: int):
-        self._frames: deque[BiotacFrame] = deque(maxlen=max(1, int(maxlen)))
-        self._lock = threading.Lock()
-        self.overflows = 0
-
-    def put(self, frame: BiotacFrame) -> None:
-        with self._lock:
-            if len(self._frames) == self._frames.maxlen:
-                self.overflows += 1
-            self._frames.append(frame)
-
-    def drain(self) -> list[BiotacFrame]:
-        """Every frame put since the last call, oldest first."""
-        with self._lock:
-            out = list(self._frames)
-            self._frames.clear()
-        return out
+class FrameTap(SampleBuffer):
+    """A second, independent copy of a sensor's frame stream (see :meth:`TactileSensors.tap`):
+    the newest ``maxlen`` frames, the ones it had to drop counted in ``overflows``."""
 
 
 class TactileSensors(Device):
