@@ -3,7 +3,7 @@
 Every file is read twice, chunk by chunk, so memory does not grow with its length: a first
 pass (:func:`scan`) checks every frame and collects what the import must decide before
 writing (connected fingers, the early window of a baseline estimate, the clock model); the
-second pass (:func:`.writer.write_store`) writes the frames as they come.
+second pass (:func:`.writer.write_import_store`) writes the frames as they come.
 
 Order of work, so that bad input never leaves anything behind: check the options, discover
 the files (a directory's subfolders included), check no target exists, remove what a
@@ -28,7 +28,7 @@ from runstore.provenance import collect
 from .bag import TOPIC, BagFile
 from .baseline import Baseline, EarlyWindow, estimate_baseline, load_calibration
 from .csv import GAP_FACTOR, CsvFile
-from .recording import (CHUNK_FRAMES, Connectivity, ImportInputError, Prepared, Reader, Recording, Scan,
+from .recording import (CHUNK_FRAMES, Connectivity, ImportInputError, PreparedSource, Reader, Recording, Scan,
                         decide_fingers, keep_fingers, parse_rate)
 from .sources import Source, checksum, discover, sha256_file
 from .writer import discard, publish, release_staging, remove_stale_staging, staging_dir, write_run
@@ -122,7 +122,7 @@ def check_settings(settings: ImportSettings) -> None:
     parse_rate(settings.rate_hz)
 
 
-def prepare(src: Source, settings: ImportSettings) -> Prepared:
+def prepare(src: Source, settings: ImportSettings) -> PreparedSource:
     """Open and scan one source (the first pass) and decide its fingers (see
     :func:`.recording.decide_fingers`)."""
     reader = open_source(src, settings)
@@ -130,7 +130,7 @@ def prepare(src: Source, settings: ImportSettings) -> Prepared:
     where = str(reader.meta.get("path", src.path))
     decision = decide_fingers(found.fingers, found.unconnected, settings.fingers, where)
     kept = tuple(f for f in found.fingers if f in decision["kept"])
-    return Prepared(reader, found, kept, decision, settings.chunk_frames)
+    return PreparedSource(reader, found, kept, decision, settings.chunk_frames)
 
 
 def choose_baseline(settings: ImportSettings, recs: list[Recording], names: list[str]) -> Baseline | None:
@@ -273,7 +273,7 @@ def reader_warnings(meta: dict) -> list[str]:
     return out
 
 
-def run_metadata(src: Source, prepared: Prepared, baseline: Baseline | None, config_yaml: str,
+def run_metadata(src: Source, prepared: PreparedSource, baseline: Baseline | None, config_yaml: str,
                  overrides, n_sources: int) -> tuple[dict, dict]:
     """The root attribute ``import`` and the provenance of one imported file.
 

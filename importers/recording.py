@@ -125,7 +125,7 @@ class Scan:
 
 
 @dataclass
-class Prepared:
+class PreparedSource:
     """One file ready for the second pass: its reader, what the first pass found, the
     fingers to store (Shadow order), the finger decision (:func:`decide_fingers`) and the
     frames per chunk."""

@@ -15,7 +15,7 @@ reads it like any run:
 - root attributes: ``protocol="import"``, ``labels=[]``, ``status="success"``, ``import``
   (source, checksum, importer, finger decision), ``baseline``, ``calibration``, ``streams``.
 
-Streaming (:func:`write_store`): the file is read again chunk by chunk (the second pass; the
+Streaming (:func:`write_import_store`): the file is read again chunk by chunk (the second pass; the
 first, :func:`.importer.scan`, fitted the clock model and chose the fingers) and each chunk is
 appended as it comes, so memory is one chunk whatever the file's length. What needs every
 frame is computed without holding them: the frame rate (the exact median interval,
@@ -47,7 +47,7 @@ from runstore.provenance import write_run_json
 from runstore.layout import event_columns
 
 from .baseline import Baseline
-from .recording import ImportInputError, Prepared, Recording, diffs, median_of, rate_of
+from .recording import ImportInputError, PreparedSource, Recording, diffs, median_of, rate_of
 
 PROTOCOL = "import"
 OPTIONAL = ("pdc", "tdc", "tac")
@@ -137,7 +137,7 @@ def stored_rate(store_path: Path, n: int, rows: int) -> float:
     return rate_of(median_of(intervals, n - 1))
 
 
-def write_store(prepared: Prepared, store_path: Path, provenance: dict, import_attrs: dict,
+def write_import_store(prepared: PreparedSource, store_path: Path, provenance: dict, import_attrs: dict,
                 baseline: Baseline | None = None) -> dict:
     """Create the run store ``store_path`` (must not exist) holding the file, streamed; status ``success``.
 
@@ -191,7 +191,7 @@ def write_store(prepared: Prepared, store_path: Path, provenance: dict, import_a
     return {**stream, "t0": scan.t0, "rate_hz": rate}
 
 
-def _append_chunks(store: RunStore, prepared: Prepared, to_run, host_t0: float, import_detail: dict) -> dict:
+def _append_chunks(store: RunStore, prepared: PreparedSource, to_run, host_t0: float, import_detail: dict) -> dict:
     """Append every chunk (the second pass) with its gap events after the ``import`` event;
     returns the counters (samples, gaps, missing, invalid) and the residual-latency sample
     (device s, host s) of every ``max(1, N // LATENCY_SAMPLE)``-th frame."""
@@ -284,11 +284,11 @@ def remove_stale_staging(folders) -> list[Path]:
     return stale
 
 
-def write_run(prepared: Prepared, staging: Path, provenance: dict, import_attrs: dict,
+def write_run(prepared: PreparedSource, staging: Path, provenance: dict, import_attrs: dict,
               baseline: Baseline | None = None) -> dict:
-    """``staging/run.zarr`` (:func:`write_store`) and ``staging/run.json`` (provenance + status
-    ``success``). Returns :func:`write_store`'s summary."""
-    summary = write_store(prepared, staging / "run.zarr", provenance, import_attrs, baseline)
+    """``staging/run.zarr`` (:func:`write_import_store`) and ``staging/run.json`` (provenance + status
+    ``success``). Returns :func:`write_import_store`'s summary."""
+    summary = write_import_store(prepared, staging / "run.zarr", provenance, import_attrs, baseline)
     write_run_json(staging / "run.json", provenance, RunStatus.SUCCESS,
                    extra={"import": import_attrs, "baseline": (baseline.to_attrs(prepared.fingers) if baseline
                                                                else {"method": "none"})})

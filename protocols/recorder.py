@@ -1,13 +1,14 @@
 """The recorder: acquire every stream on its own thread, write the run store as data arrive.
 
-    store = RunStore.create(run_dir / "run.zarr", protocol="straws_sweep", fingers=lab.biotac.fingers)
-    sources = {"biotac": lab.biotac.read, "arm": lab.arm.read_states, "hand": lab.hand.read_states,
-               "pump": lab.pump.read_states, "scale": lab.scale.read}
-    with Recorder(store, sources, lab.clock) as rec:
+    store = RunStore.create(run_dir / "run.zarr", protocol="straws_sweep", fingers=lab.biotac.fingers,
+                            streams=lab.streams())
+    with Recorder(store, lab.sources(), lab.clock) as rec:
         rec.event("step_start", "sweep")
         ...
     # or rec.start() ... rec.stop("success", truth=lab.truth.to_dict())
 
+What a stream's samples become (columns, dtypes, its time coordinate and raw time columns) is
+its sample type's declaration (:mod:`hardware.streams`), kept by the store (``store.streams``).
 One acquisition thread per stream polls its device's non-blocking drain method every
 ``poll_interval_s`` of the device clock (``clock.sleep``, so simulated time is respected)
 and queues the samples; a device error becomes a ``fault`` event and marks the stream

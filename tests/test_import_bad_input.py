@@ -122,7 +122,7 @@ def test_failure_while_writing_removes_staging(tmp_path, monkeypatch):
     d.mkdir()
     electrode_csv(d / "a.csv")
     electrode_csv(d / "b.csv")
-    real = writer_mod.write_store
+    real = writer_mod.write_import_store
     calls = []
 
     def flaky(rec, store_path, *a, **k):          # the second store fails half-way through
@@ -133,7 +133,7 @@ def test_failure_while_writing_removes_staging(tmp_path, monkeypatch):
             raise OSError("disk full")
         return real(rec, store_path, *a, **k)
 
-    monkeypatch.setattr(writer_mod, "write_store", flaky)
+    monkeypatch.setattr(writer_mod, "write_import_store", flaky)
     out = tmp_path / "out" / "deeper"
     with pytest.raises(OSError, match="disk full"):
         import_source(d, out, ImportSettings(rate_hz=100))
