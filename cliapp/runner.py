@@ -45,6 +45,13 @@ def run_app(app, argv=None) -> None:
             signal.signal(s, signal.SIG_IGN)        # its exit status into a kill (at interpreter exit)
 
 
+def report(exc: BaseException, what: str, verbose: bool = False) -> None:
+    """An error on stderr as one line, ``what: message`` (the traceback before it with ``verbose``)."""
+    if verbose:
+        traceback.print_exception(exc)
+    print(f"{what}: {exc}", file=sys.stderr)
+
+
 def error_line(exc: BaseException) -> str:
     """An exception and its cause as one line (Hydra's messages span several)."""
     parts = [str(exc)]

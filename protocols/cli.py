@@ -15,7 +15,6 @@ import csv
 import json
 import logging
 import sys
-import traceback
 from pathlib import Path
 
 import hydra
@@ -23,7 +22,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
-from cliapp.runner import run_app
+from cliapp.runner import report, run_app
 from runstore import RunStatus, rundir
 
 from . import resume
@@ -122,9 +121,7 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
 
 
 def _report(cfg, exc: Exception, what: str) -> None:
-    if cfg.get("verbose"):
-        traceback.print_exception(exc)
-    print(f"{what}: {exc}", file=sys.stderr)
+    report(exc, what, bool(cfg.get("verbose")))
     log.error(f"{what}: {exc}", exc_info=exc)
 
 
