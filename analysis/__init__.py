@@ -1,1 +1,2 @@
-"""Analysis package: filled by later issues (see docs/ and ../shared/DESIGN.md)."""
+"""Analysis: a run store in (:mod:`.load`), labelled tactile flow per segment out (:mod:`.run`,
+``tactile-analyze``). See docs/architecture.md and docs/analysis.md."""

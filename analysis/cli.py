@@ -113,7 +113,7 @@ def _app(cfg) -> None:
 
 
 def main() -> None:
-    from protocols.app import run_app
+    from cliapp.runner import run_app
     run_app(_app)                   # a config file is data: one line for a bad one, exit 2
     sys.exit(_state["code"])
 

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from runstore.reader import open_run
+
 
 class AnalysisInputError(ValueError):
     """The input cannot be analysed at all (not a run store, no tactile data)."""
@@ -179,7 +181,6 @@ def load_run(path) -> RunData:
     store or holds no usable tactile data. Missing optional groups (arm, events) are listed
     in ``RunData.missing``.
     """
-    import xarray as xr
     path = Path(path)
     if not path.exists():
         raise AnalysisInputError(f"{path}: no such file or directory")
@@ -187,7 +188,7 @@ def load_run(path) -> RunData:
         raise AnalysisInputError(f"{path}: not a run store (expected a zarr v3 directory with zarr.json, "
                                  f"as written by tactile-run)")
     try:
-        dt = xr.open_datatree(str(path), engine="zarr", consolidated=True)
+        dt = open_run(path)
     except Exception as exc:  # noqa: BLE001 - any reader error means: not readable as a run store
         raise AnalysisInputError(f"{path}: cannot be read as a run store ({type(exc).__name__}: "
                                  f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
@@ -265,8 +266,7 @@ def _values(ds, name: str, path: Path, dtype=float) -> np.ndarray:
 
 def open_truth(path):
     """The ``truth`` group as {subgroup: {var: ndarray}} or ``None`` (for scoring only)."""
-    import xarray as xr
-    dt = xr.open_datatree(str(path), engine="zarr", consolidated=True)
+    dt = open_run(path)
     if "truth" not in dt.children:
         return None
     out = {}

@@ -7,7 +7,7 @@ i.e. stores with a ``truth`` group), ``figures/*.png``, and ``analysis_history.j
 per replaced analysis: its config, provenance and headline). Everything is written into a
 staging directory first and then renamed into place (:func:`analysis.results.swap_in`), so a
 failure leaves the previous results untouched and never partial files. The run directory is
-locked while it is analysed (``protocols.rundir``: not while the run records, not twice at
+locked while it is analysed (``runstore.rundir``: not while the run records, not twice at
 once), and what a killed analysis left behind is removed first.
 """
 
@@ -16,14 +16,14 @@ from __future__ import annotations
 import json
 import math
 import shutil
-import subprocess
 import uuid
 from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
-from protocols import rundir
+from runstore import rundir
+from runstore.provenance import git_state
 
 from . import figures as figs
 from . import results
@@ -42,16 +42,9 @@ def code_version() -> dict:
         pkg = version("tactile-flow")
     except PackageNotFoundError:  # pragma: no cover
         pkg = "unknown"
-    root = Path(__file__).resolve().parents[1]
-    commit, dirty = "unknown", None
-    try:
-        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
-                                timeout=5).stdout.strip() or "unknown"
-        status = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--", "analysis", "tactile"],
-                                capture_output=True, text=True, timeout=5).stdout
-        dirty = bool(status.strip())
-    except (OSError, subprocess.SubprocessError):
-        pass
+    git = git_state(Path(__file__).resolve().parents[1], paths=("analysis", "tactile"))
+    dirty = None if git["dirty"] == "unknown" else bool(git["dirty"] or git["untracked_files"])
+    commit = git["commit"]
     return {"package": pkg, "git_commit": commit, "analysis_or_tactile_dirty": dirty}
 
 

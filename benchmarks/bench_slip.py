@@ -336,8 +336,8 @@ def rest_job(kind: str, seed: int, grip_seconds: float = 60.0, flexion: float = 
 
 # ----------------------------------------------------------------------------- the bag
 def rest_bag() -> dict:
-    from protocols.importers.bag import read_bag
-    from protocols.importers.recording import select_fingers
+    from importers.bag import read_bag
+    from importers.recording import select_fingers
     from protocols.live import replay, tactile_config
     from tactile import signals
     from tactile.online import OnlineFlow

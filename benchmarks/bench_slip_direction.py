@@ -129,7 +129,7 @@ def real_contact_rate() -> dict:
     import csv
 
     from analysis.preprocess import despike
-    from protocols.importers import read_bag, select_fingers
+    from importers import read_bag, select_fingers
     from tactile import contact, signals
     data = ROOT / "tests" / "data"
     rec, _ = select_fingers(read_bag(data / "biotac_rest_untouched.bag"))

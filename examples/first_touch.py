@@ -25,7 +25,7 @@ import numpy as np
 import xarray as xr
 from omegaconf import OmegaConf
 
-from hardware.sim.surfaces import load_surface
+from hardware.surfaces import load_surface
 from protocols.plan import Geometry
 
 

@@ -9,12 +9,17 @@ in m/s².
 
 from __future__ import annotations
 
+import math
 from abc import abstractmethod
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .device import Device
+from .streams import Column, Coord, Stream, device_time
+
+#: the components of a pose, twist or wrench (m or N, then rad or N m)
+AXIS6 = ("x", "y", "z", "rx", "ry", "rz")
 from .errors import ConfigError, WorkspaceError
 
 
@@ -37,6 +42,35 @@ class ArmState:
     tcp_speed: np.ndarray
     tcp_wrench: np.ndarray
     protective_stopped: bool = False
+
+    @classmethod
+    def describe(cls) -> tuple[Stream, ...]:
+        """The ``arm`` stream (:mod:`hardware.streams`)."""
+        A = ("time_arm", "axis6")
+        return (Stream("arm", "arm", "time_arm", "arm state", rate_hz=500.0,
+                       device_time=device_time("controller_time", "time_arm",
+                                               "controller timestamp (s since controller start)", "controller_time"),
+                       columns=(
+            Column("tcp_pose", A, "f8", "m, rad", "TCP pose [x, y, z] m and axis-angle [rx, ry, rz] rad, robot base frame"),
+            Column("tcp_speed", A, "f8", "m s-1, rad s-1", "TCP linear and angular velocity"),
+            Column("tcp_wrench", A, "f8", "N, N m",
+                   "force [Fx, Fy, Fz] N and torque [Tx, Ty, Tz] N m on the tool, base frame"),
+            Column("protective_stopped", ("time_arm",), "bool", "1", "controller protective-stop flag")),
+                       coords=(Coord("axis6", AXIS6, "", "pose / twist / wrench component"),)),)
+
+
+def trapezoid_time(distance: float, speed: float, accel: float) -> float:
+    """Duration (s) of a rest-to-rest move of ``distance`` (m or rad) at most ``speed`` (per s)
+    and ``accel`` (per s²): a trapezoidal speed profile, triangular when too short to reach ``speed``.
+
+    >>> trapezoid_time(0.1, 0.05, 0.5)           # 2 s cruising + 0.1 s ramping
+    2.1
+    """
+    if distance <= 0:
+        return 0.0
+    if distance < speed ** 2 / accel:
+        return 2.0 * math.sqrt(distance / accel)
+    return distance / speed + speed / accel
 
 
 @dataclass
@@ -80,6 +114,7 @@ class Arm(Device):
     """A 6-axis arm with a TCP, moved in Cartesian space."""
 
     kind = "arm"
+    sample_type = ArmState
 
     @abstractmethod
     def tcp_pose(self) -> np.ndarray:

@@ -8,20 +8,17 @@ and PAC (dynamic pressure, vibration) at 2.2 kHz, delivered in batches with each
 
 from __future__ import annotations
 
-import threading
 from abc import abstractmethod
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
-from .device import Device
+from tactile import FINGERS, N_TAXELS  # noqa: F401  (Shadow finger order; taxels per sensor)
+
+from .device import Device, SampleBuffer, batch_times
+from .streams import Column, Coord, Stream, as_dtype, device_time
 from .errors import ConfigError
 
-FINGERS: tuple[str, ...] = ("ff", "mf", "rf", "lf", "th")
-"""Shadow Hand finger order."""
-
-N_TAXELS = 24
 COUNTS_MAX = 4095
 PAC_RATE_HZ = 2200.0
 
@@ -77,37 +74,66 @@ class BiotacFrame:
         return all(bool(np.all((a >= 0) & (a <= COUNTS_MAX)))
                    for a in (self.electrodes, self.pdc, self.tdc, self.tac, self.pac))
 
+    @classmethod
+    def describe(cls, fingers=FINGERS) -> tuple[Stream, ...]:
+        """The ``biotac`` stream (one row per frame) and the ``biotac_pac`` stream derived from
+        it (one row per 2.2 kHz PAC sample, :func:`pac_columns`), :mod:`hardware.streams`."""
+        T, TF = ("time",), ("time", "finger")
+        finger = Coord("finger", tuple(fingers), "", "finger (Shadow order)")
+        frames = Stream("biotac", "biotac", "time", "BioTac frame", rate_hz=100.0,
+                        device_time=device_time("device_time", "time",
+                                                "sensor bridge timestamp of the frame (device clock)"),
+                        columns=(
+            Column("seq", T, "i8", "1", "frame sequence number (one per frame, all fingers)"),
+            Column("valid", T, "bool", "1", "every channel of the frame within 0..4095", "is_valid"),
+            Column("electrodes", (*TF, "taxel"), "i2", "count", "electrode impedance reading, raw 12-bit counts"),
+            Column("pdc", TF, "i2", "count", "static pressure (PDC), raw counts"),
+            Column("tdc", TF, "i2", "count", "temperature (TDC), raw counts"),
+            Column("tac", TF, "i2", "count", "temperature change (TAC), raw counts")),
+                        coords=(finger, Coord("taxel", np.arange(1, N_TAXELS + 1, dtype=np.int16), "1",
+                                              "taxel number (SynTouch)")))
+        pac = Stream("biotac_pac", "biotac_pac", "time_pac", "PAC", rate_hz=PAC_RATE_HZ, source="biotac",
+                     device_time=device_time("device_time", "time_pac",
+                                             "device time of the PAC sample (its frame's timestamp minus the later "
+                                             "samples of the frame at 2.2 kHz)"),
+                     columns=(Column("pac", ("time_pac", "finger"), "i2", "count",
+                                     "dynamic pressure (PAC) at 2.2 kHz, raw counts"),),
+                     coords=(finger,), rows=pac_columns)
+        return frames, pac
 
-class FrameTap:
-    """A second, independent copy of a sensor's frame stream (see :meth:`TactileSensors.tap`).
 
-    Bounded: it keeps the newest ``maxlen`` frames and counts the ones it had to drop
-    (``overflows``), so a consumer that stalls can never grow memory.
+def pac_columns(frames, previous: float | None = None, rate_hz: float = PAC_RATE_HZ) -> dict[str, np.ndarray]:
+    """PAC samples of ``frames`` → (M, F) pac (int16 counts), (M,) device_time, host_time (s, raw).
+
+    A frame's n PAC samples end at the frame's timestamp, 1/rate apart — closer when a
+    frame follows the one before sooner than its samples span (stamps jitter), so the times
+    increase strictly (:func:`hardware.device.batch_times`; ``previous``: the device time of
+    the last PAC sample before these frames); host_time is the frame's.
     """
+    pac = [np.asarray(f.pac).T for f in frames]                       # (n, F) each
+    counts = [len(p) for p in pac]
+    F = pac[0].shape[1] if pac else 0
+    return {"pac": as_dtype(np.concatenate(pac), np.int16) if pac else np.zeros((0, F), np.int16),
+            "device_time": batch_times([f.device_time for f in frames], counts, 1.0 / rate_hz, previous),
+            "host_time": np.repeat(np.array([f.host_time for f in frames], float), counts)}
 
-    def __init__(self, maxlen: int):
-        self._frames: deque[BiotacFrame] = deque(maxlen=max(1, int(maxlen)))
-        self._lock = threading.Lock()
-        self.overflows = 0
 
-    def put(self, frame: BiotacFrame) -> None:
-        with self._lock:
-            if len(self._frames) == self._frames.maxlen:
-                self.overflows += 1
-            self._frames.append(frame)
-
-    def drain(self) -> list[BiotacFrame]:
-        """Every frame put since the last call, oldest first."""
-        with self._lock:
-            out = list(self._frames)
-            self._frames.clear()
-        return out
+class FrameTap(SampleBuffer):
+    """A second, independent copy of a sensor's frame stream (see :meth:`TactileSensors.tap`):
+    the newest ``maxlen`` frames, the ones it had to drop counted in ``overflows``."""
 
 
 class TactileSensors(Device):
     """The set of BioTacs on the hand, read as a stream of frames."""
 
     kind = "biotac"
+    sample_type = BiotacFrame
+
+    def describe(self) -> tuple[Stream, ...]:
+        return BiotacFrame.describe(self.fingers)
+
+    def read_samples(self) -> list[BiotacFrame]:
+        return self.read()
 
     @property
     @abstractmethod

@@ -8,10 +8,12 @@ device raises :class:`~hardware.errors.NotConnectedError`.
 
 from __future__ import annotations
 
+import threading
 import time
 from abc import ABC, abstractmethod
+from collections import deque
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -83,11 +85,65 @@ def batch_times(ends, counts, period: float, previous: float | None = None) -> n
     return np.repeat(ends, counts) - back * np.repeat(spacing, counts)
 
 
+class SampleBuffer:
+    """The newest ``maxlen`` samples a device received and has not handed out yet; thread-safe.
+
+    Bounded, so a consumer that stalls can never grow memory: a full buffer drops its oldest
+    sample and counts it in ``overflows``. ``maxlen`` can change (a rate known only once the
+    device is connected); the samples kept are the newest.
+    """
+
+    def __init__(self, maxlen: int):
+        self._items: deque = deque(maxlen=max(1, int(maxlen)))
+        self._lock = threading.Lock()
+        self.overflows = 0
+
+    @property
+    def maxlen(self) -> int:
+        return self._items.maxlen
+
+    @maxlen.setter
+    def maxlen(self, n: int) -> None:
+        with self._lock:
+            self._items = deque(self._items, maxlen=max(1, int(n)))
+
+    def put(self, sample) -> None:
+        with self._lock:
+            if len(self._items) == self._items.maxlen:
+                self.overflows += 1
+            self._items.append(sample)
+
+    def drain(self) -> list:
+        """Every sample put since the last call, oldest first."""
+        with self._lock:
+            out = list(self._items)
+            self._items.clear()
+        return out
+
+    def clear(self) -> None:
+        with self._lock:
+            self._items.clear()
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+
 class Device(ABC):
     """Base of every device interface: connect/close, identity, context manager."""
 
     #: short name used in error messages and fault configs ("arm", "hand", "biotac", ...)
     kind: str = "device"
+    #: the type of the samples it records, whose ``describe()`` declares their columns
+    sample_type: ClassVar[type | None] = None
+
+    def describe(self) -> tuple:
+        """The streams this device records (:class:`hardware.streams.Stream`), as its sample
+        type declares them; none for a device that records nothing."""
+        return self.sample_type.describe() if self.sample_type is not None else ()
+
+    def read_samples(self) -> list:
+        """Every sample received since the last call; never blocks (the recorder's source)."""
+        return self.read_states()
 
     @abstractmethod
     def connect(self) -> None:

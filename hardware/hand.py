@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .device import Device
+from .streams import Column, Coord, Stream, device_time
 
 JOINT_NAMES: tuple[str, ...] = (
     "rh_FFJ1", "rh_FFJ2", "rh_FFJ3", "rh_FFJ4",
@@ -46,11 +47,26 @@ class HandState:
     position: np.ndarray
     target: np.ndarray
 
+    @classmethod
+    def describe(cls) -> tuple[Stream, ...]:
+        """The ``hand`` stream (:mod:`hardware.streams`)."""
+        J = ("time_hand", "joint")
+        return (Stream("hand", "hand", "time_hand", "hand joint state", rate_hz=100.0,
+                       device_time=device_time("device_time", "time_hand", "hand joint-state stamp (device clock)"),
+                       columns=(Column("position", J, "f8", "rad", "measured joint angle"),
+                                Column("target", J, "f8", "rad", "commanded joint angle")),
+                       coords=(Coord("joint", JOINT_NAMES, "", "Shadow Hand joint name"),)),)
+
+
+#: s, the trajectory that holds the hand where it is (:meth:`Hand.stop`)
+STOP_S = 0.05
+
 
 class Hand(Device):
     """A multi-joint hand commanded with joint targets."""
 
     kind = "hand"
+    sample_type = HandState
 
     @abstractmethod
     def positions(self) -> dict[str, float]:
@@ -66,3 +82,11 @@ class Hand(Device):
     @abstractmethod
     def read_states(self) -> list[HandState]:
         """Every joint-state sample received since the last call; never blocks."""
+
+    def stop(self) -> None:
+        """Hold every joint where it is now: a trajectory under way ends within
+        :data:`STOP_S` (joints whose angle is unknown keep their targets). Does not open the
+        hand, so a grasped object stays held."""
+        here = {name: q for name, q in self.positions().items() if q == q}     # NaN: unknown
+        if here:
+            self.move_to(here, STOP_S, wait=False)

@@ -34,9 +34,9 @@ from .serial_biotac import SerialBiotacConfig, SerialBiotacs
 from .serial_pour import SerialPump, SerialPumpConfig, SerialScale, SerialScaleConfig
 from .shadow import RosbridgeBiotacConfig, RosbridgeBiotacs, ShadowHand, ShadowHandConfig
 from .rosbridge import RosbridgeConfig
-from .sim import Lab
+from .lab_container import Lab
 from .sim.config import WorkspaceConfig, build, to_plain
-from .sim.surfaces import load_surface
+from .surfaces import load_surface
 
 TOP_KEYS = ("backend", "fingers", "workspace", "arm", "fingertips", "rosbridge", "hand", "biotac", "pump", "scale",
             "biotac_calibration")
@@ -45,18 +45,7 @@ BIOTAC_SOURCES = ("rosbridge", "serial")
 ARM_PLAN_KEYS = ("home_pose", "max_speed_m_s", "max_accel_m_s2", "stop_accel_m_s2", "max_contact_force_n")
 
 
-class RealLab(Lab):
-    """:class:`hardware.sim.Lab` for real drivers: a failed connect closes what it opened."""
-
-    def connect(self) -> None:
-        try:
-            super().connect()
-        except BaseException:
-            self.close()
-            raise
-
-
-def make_real_lab(hw_cfg, surface_cfg=None, *, key: str = "hardware") -> RealLab:
+def make_real_lab(hw_cfg, surface_cfg=None, *, key: str = "hardware") -> Lab:
     """Build the lab of ``conf/hardware/lab.yaml``; devices are returned unconnected.
 
     ``hw_cfg``: dict or OmegaConf node; ``surface_cfg``: as ``conf/surface/*.yaml`` (geometry
@@ -75,7 +64,7 @@ def make_real_lab(hw_cfg, surface_cfg=None, *, key: str = "hardware") -> RealLab
     rosbridge = _make(RosbridgeConfig, hw.get("rosbridge"), f"{key}.rosbridge")
     hand_cfg = _make(ShadowHandConfig, hw.get("hand"), f"{key}.hand", rosbridge=rosbridge)
     surface = load_surface(surface_cfg) if surface_cfg is not None else None
-    return RealLab(arm=make_arm(hw.get("arm"), workspace, f"{key}.arm"),
+    return Lab(arm=make_arm(hw.get("arm"), workspace, f"{key}.arm"),
                    hand=ShadowHand(hand_cfg, clock),
                    biotac=make_biotacs(hw.get("biotac"), fingers, rosbridge, f"{key}.biotac", clock),
                    pump=SerialPump(_make(SerialPumpConfig, hw.get("pump"), f"{key}.pump"), clock),

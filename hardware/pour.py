@@ -6,6 +6,7 @@ from abc import abstractmethod
 from dataclasses import dataclass
 
 from .device import Device
+from .streams import Column, Stream, device_time
 
 
 @dataclass(frozen=True)
@@ -24,6 +25,17 @@ class PumpState:
     dispensed_ml: float
     running: bool
 
+    @classmethod
+    def describe(cls) -> tuple[Stream, ...]:
+        """The ``pump`` stream, in the ``pour`` group (:mod:`hardware.streams`)."""
+        T = ("time_pump",)
+        return (Stream("pump", "pour", "time_pump", "pump", rate_hz=10.0, host_time="pump_host_time",
+                       device_time=device_time("pump_device_time", "time_pump", "pump timestamp (device clock)"),
+                       columns=(Column("pump_rate", T, "f8", "ml min-1", "pump flow rate", "rate_ml_min"),
+                                Column("dispensed", T, "f8", "ml", "volume dispensed since the pump connected",
+                                       "dispensed_ml"),
+                                Column("pump_running", T, "bool", "1", "pump running", "running"))),)
+
 
 @dataclass(frozen=True)
 class ScaleReading:
@@ -34,11 +46,21 @@ class ScaleReading:
     mass_g: float
     stable: bool
 
+    @classmethod
+    def describe(cls) -> tuple[Stream, ...]:
+        """The ``scale`` stream, in the ``pour`` group (:mod:`hardware.streams`)."""
+        T = ("time_scale",)
+        return (Stream("scale", "pour", "time_scale", "scale", rate_hz=10.0, host_time="scale_host_time",
+                       device_time=device_time("scale_device_time", "time_scale", "scale timestamp (device clock)"),
+                       columns=(Column("mass", T, "f8", "g", "net mass on the scale (since the last tare)", "mass_g"),
+                                Column("stable", T, "bool", "1", "scale stability flag"))),)
+
 
 class Pump(Device):
     """A pump commanded by flow rate or by volume."""
 
     kind = "pump"
+    sample_type = PumpState
 
     @abstractmethod
     def set_rate(self, ml_per_min: float) -> None:
@@ -63,6 +85,10 @@ class Scale(Device):
     """A streaming scale."""
 
     kind = "scale"
+    sample_type = ScaleReading
+
+    def read_samples(self) -> list[ScaleReading]:
+        return self.read()
 
     @abstractmethod
     def mass(self) -> float:

@@ -18,13 +18,12 @@ from __future__ import annotations
 import binascii
 import struct
 import threading
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .biotac import FINGERS, N_TAXELS, BiotacFrame, TactileSensors, check_fingers
-from .device import Clock, DeviceIdentity, WallClock
+from .device import Clock, DeviceIdentity, SampleBuffer, WallClock
 from .errors import (BUFFER_RANGE_S, RATE_RANGE_HZ, ConfigError, DeviceDisconnectedError, DeviceFaultError,
                      DeviceTimeoutError, NotConnectedError, require_positive, require_within)
 
@@ -228,15 +227,19 @@ class SerialBiotacs(TactileSensors):
         self._serial = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
-        self._buffer: deque[BiotacFrame] = deque(maxlen=max(1, int(cfg.buffer_s * cfg.rate_hz)))
+        self._buffer = SampleBuffer(cfg.buffer_s * cfg.rate_hz)
         self._latest: BiotacFrame | None = None
         self._first = threading.Event()
         self._lost: str | None = None
         self._bridge_fingers: tuple[str, ...] = ()
-        self.overflows = 0
         self.mismatched = 0
 
     # -- interface -----------------------------------------------------------------
+    @property
+    def overflows(self) -> int:
+        """Samples lost to a full buffer (a consumer that did not drain for ``buffer_s``)."""
+        return self._buffer.overflows
+
     @property
     def fingers(self) -> tuple[str, ...]:
         return self.cfg.fingers
@@ -289,10 +292,7 @@ class SerialBiotacs(TactileSensors):
 
     def read(self) -> list[BiotacFrame]:
         self._check_alive()
-        out = []
-        while self._buffer:
-            out.append(self._buffer.popleft())
-        return out
+        return self._buffer.drain()
 
     def latest(self) -> BiotacFrame | None:
         self._check_alive()
@@ -351,9 +351,7 @@ class SerialBiotacs(TactileSensors):
                             electrodes=wf.electrodes[rows], pdc=wf.pdc[rows].astype(np.int32),
                             tdc=wf.tdc[rows].astype(np.int32), tac=wf.tac[rows].astype(np.int32),
                             pac=wf.pac[rows])
-        if len(self._buffer) == self._buffer.maxlen:
-            self.overflows += 1
-        self._buffer.append(frame)
+        self._buffer.put(frame)
         self._latest = frame
         self._publish(frame)
         self._first.set()

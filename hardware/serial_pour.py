@@ -19,10 +19,9 @@ import math
 import queue
 import re
 import threading
-from collections import deque
 from dataclasses import dataclass, field
 
-from .device import Clock, DeviceIdentity, WallClock, batch_times
+from .device import Clock, DeviceIdentity, SampleBuffer, WallClock, batch_times
 from .errors import (BUFFER_RANGE_S, RATE_RANGE_HZ, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
                      NotConnectedError, require_positive, require_within)
 from .pour import Pump, PumpState, Scale, ScaleReading
@@ -133,7 +132,7 @@ class SerialPump(Pump):
         self._port: LinePort | None = None
         self._lock = threading.Lock()                  # one command/reply exchange at a time
         self._replies: queue.Queue[str] = queue.Queue()
-        self._buffer: deque[PumpState] = deque(maxlen=max(1, int(cfg.buffer_s * cfg.poll_hz)))
+        self._buffer = SampleBuffer(cfg.buffer_s * cfg.poll_hz)
         self._stop = threading.Event()
         self._poller: threading.Thread | None = None
         self._firmware = "?"
@@ -207,10 +206,7 @@ class SerialPump(Pump):
 
     def read_states(self) -> list[PumpState]:
         self._require_alive()
-        out = []
-        while self._buffer:
-            out.append(self._buffer.popleft())
-        return out
+        return self._buffer.drain()
 
     # -- internals -----------------------------------------------------------------
     def _check_rate(self, rate, name: str) -> float:
@@ -266,7 +262,7 @@ class SerialPump(Pump):
             except Exception:  # one missed sample; the recorder sees the gap
                 self.poll_errors += 1
                 continue
-            self._buffer.append(state)
+            self._buffer.put(state)
 
 
 # ============================================================================ scale
@@ -312,7 +308,7 @@ class SerialScale(Scale):
         self.cfg = cfg
         self.clock = clock or WallClock()
         self._port: LinePort | None = None
-        self._buffer: deque[ScaleReading] = deque(maxlen=max(1, int(cfg.buffer_s * cfg.rate_hz)))
+        self._buffer = SampleBuffer(cfg.buffer_s * cfg.rate_hz)
         self._last: ScaleReading | None = None
         self._first = threading.Event()
         self._ack = threading.Event()
@@ -372,10 +368,7 @@ class SerialScale(Scale):
 
     def read(self) -> list[ScaleReading]:
         self._require_alive()
-        out = []
-        while self._buffer:
-            out.append(self._buffer.popleft())
-        return out
+        return self._buffer.drain()
 
     # -- internals -----------------------------------------------------------------
     def _require_alive(self) -> None:
@@ -400,7 +393,7 @@ class SerialScale(Scale):
         self.overloaded = line.startswith("OL")
         if self.overloaded:
             return
-        self._buffer.append(reading)
+        self._buffer.put(reading)
         self._last = reading
         self._first.set()
 

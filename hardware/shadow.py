@@ -19,13 +19,12 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .biotac import FINGERS, N_TAXELS, BiotacFrame, TactileSensors, check_fingers
-from .device import Clock, DeviceIdentity, WallClock
+from .device import Clock, DeviceIdentity, SampleBuffer, WallClock
 from .errors import (BUFFER_RANGE_S, RATE_RANGE_HZ, ConfigError, DeviceDisconnectedError, DeviceFaultError,
                      DeviceTimeoutError, NotConnectedError, SafetyError, require_positive, require_within)
 from .hand import JOINT_INDEX, JOINT_NAMES, Hand, HandState, check_joint_names
@@ -51,24 +50,22 @@ class _Stream:
     """Bounded buffer of samples with the newest kept apart, and its staleness check."""
 
     def __init__(self, maxlen: int):
-        self.buffer: deque = deque(maxlen=max(1, maxlen))
+        self.buffer = SampleBuffer(maxlen)
         self.latest = None
         self.latest_host = None
         self.first = threading.Event()
-        self.overflows = 0
+
+    @property
+    def overflows(self) -> int:
+        return self.buffer.overflows
 
     def push(self, sample, host_time: float) -> None:
-        if len(self.buffer) == self.buffer.maxlen:
-            self.overflows += 1
-        self.buffer.append(sample)
+        self.buffer.put(sample)
         self.latest, self.latest_host = sample, host_time
         self.first.set()
 
     def drain(self) -> list:
-        out = []
-        while self.buffer:
-            out.append(self.buffer.popleft())
-        return out
+        return self.buffer.drain()
 
 
 class _RosbridgeDevice:

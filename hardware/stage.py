@@ -14,6 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .device import Device
+from .streams import Column, Coord, Stream, device_time
+
+#: the stage's pose / velocity components: x, y (m, m s-1) and rz (rad, rad s-1)
+STAGE_AXES = ("x", "y", "rz")
 
 
 @dataclass(frozen=True)
@@ -33,11 +37,25 @@ class StageState:
     velocity: np.ndarray
     moving: bool
 
+    @classmethod
+    def describe(cls) -> tuple[Stream, ...]:
+        """The ``stage`` stream (:mod:`hardware.streams`)."""
+        A = ("time_stage", "stage_axis")
+        return (Stream("stage", "stage", "time_stage", "object stage", rate_hz=100.0,
+                       device_time=device_time("device_time", "time_stage", "stage controller timestamp (device clock)"),
+                       columns=(
+            Column("pose", A, "f8", "m, rad", "object stage pose [x, y] m from home (robot base axes) and rotation rz "
+                   "rad about +z (counter-clockwise seen from above)"),
+            Column("velocity", A, "f8", "m s-1, rad s-1", "object stage velocity"),
+            Column("moving", ("time_stage",), "bool", "1", "a commanded stage motion is under way")),
+                       coords=(Coord("stage_axis", STAGE_AXES, "", "object stage pose / velocity component"),)),)
+
 
 class ObjectStage(Device):
     """Moves the object: relative translations and rotations, rest to rest (trapezoidal)."""
 
     kind = "stage"
+    sample_type = StageState
 
     @property
     @abstractmethod

@@ -21,13 +21,12 @@ import socket
 import struct
 import threading
 import time
-from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .arm import Arm, ArmState, Workspace
-from .device import DeviceIdentity, WallClock
+from .arm import Arm, ArmState, Workspace, trapezoid_time
+from .device import DeviceIdentity, SampleBuffer, WallClock
 from .errors import (ConfigError, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
                      EmergencyStopError, NotConnectedError, ProtectiveStopError, SafetyError)
 
@@ -120,9 +119,7 @@ class UR10Arm(Arm):
         self.workspace = config.workspace
         self._c = self._r = self._dash = None
         self._lock = threading.RLock()              # serialises control-interface calls
-        self._buffer: deque = deque()
-        self._buffer_lock = threading.Lock()
-        self.overflows = 0
+        self._buffer = SampleBuffer(config.buffer_s * 125.0)      # resized at connect to the RTDE rate
         self._stream: threading.Thread | None = None
         self._stop_stream = threading.Event()
         self._connected = False
@@ -156,6 +153,7 @@ class UR10Arm(Arm):
         self.controller_version = self._preflight()
         major = self.controller_version[0]
         self.frequency_hz = self.cfg.rtde_frequency_hz or (500.0 if major >= 5 else 125.0)
+        self._buffer.maxlen = self.cfg.buffer_s * self.frequency_hz
         import dashboard_client
         import rtde_control
         import rtde_receive
@@ -254,12 +252,8 @@ class UR10Arm(Arm):
                         bool(r.isProtectiveStopped()))
 
     def _push(self, state: ArmState) -> None:
-        with self._buffer_lock:
-            if len(self._buffer) >= int(self.cfg.buffer_s * self.frequency_hz):
-                self._buffer.popleft()
-                self.overflows += 1
-            self._buffer.append(state)
-            self._last_state = state
+        self._buffer.put(state)
+        self._last_state = state
 
     def _lose(self, why: str) -> None:
         self._lost = f"arm: link to the UR controller at {self.cfg.host} lost: {why}"
@@ -337,12 +331,14 @@ class UR10Arm(Arm):
             running = self._c.isProgramRunning() and self._c.getAsyncOperationProgressEx().isAsyncOperationRunning()
         return running or float(np.linalg.norm(self._r.getActualTCPSpeed()[:3])) > 1e-4
 
+    @property
+    def overflows(self) -> int:
+        """Samples lost to a full buffer (a consumer that did not drain for ``buffer_s``)."""
+        return self._buffer.overflows
+
     def read_states(self) -> list[ArmState]:
         self._require_link()
-        with self._buffer_lock:
-            out = list(self._buffer)
-            self._buffer.clear()
-        return out
+        return self._buffer.drain()
 
     # ------------------------------------------------------------------ command plumbing
     def _command(self, name: str, fn, *args):
@@ -402,7 +398,7 @@ class UR10Arm(Arm):
         self._mode = "move"
         if not asynchronous:
             dist = float(np.linalg.norm(target[:3] - start[:3]))
-            self.wait_until_stopped(_trapezoid_duration(dist, speed, accel) + self.cfg.move_timeout_margin_s)
+            self.wait_until_stopped(trapezoid_time(dist, speed, accel) + self.cfg.move_timeout_margin_s)
 
     def wait_until_stopped(self, timeout_s: float | None = None) -> None:
         """Block until the current motion ends (typed errors on a stop or a lost link)."""
@@ -608,13 +604,6 @@ class UR10Arm(Arm):
             if time.monotonic() >= end:
                 return False
             time.sleep(0.01)
-
-
-def _trapezoid_duration(distance: float, speed: float, accel: float) -> float:
-    """Time (s) to travel ``distance`` m from rest to rest at ``speed`` m/s, ``accel`` m/s²."""
-    if distance <= speed * speed / accel:
-        return 2 * math.sqrt(distance / accel)
-    return distance / speed + speed / accel
 
 
 def _ur_rtde_version() -> str:

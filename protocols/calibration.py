@@ -5,7 +5,7 @@ that a record which starts in contact has a zero. ``hardware.biotac_calibration`
 it comes from:
 
 - a path: a calibration JSON as ``tactile-import calibration=`` reads it
-  (:func:`protocols.importers.baseline.load_calibration`; for the real lab too);
+  (:func:`importers.baseline.load_calibration`; for the real lab too);
 - ``simulated`` (``hardware=sim`` only): the simulated sensors' unloaded counts averaged over a
   short simulated rest before the run, off by the drift since
   (:meth:`hardware.sim.sensor.BiotacModel.session_calibration`) — realistically imperfect;
@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from hardware.errors import ConfigError
-from protocols.importers.baseline import Baseline, load_calibration
-from protocols.importers.recording import ImportInputError
-from protocols.importers.sources import sha256_file
+from importers.baseline import Baseline, load_calibration
+from importers.recording import ImportInputError
+from importers.sources import sha256_file
 from tactile.signals import SensorCalibration
 
 KEY = "hardware.biotac_calibration"

@@ -15,7 +15,6 @@ import csv
 import json
 import logging
 import sys
-import traceback
 from pathlib import Path
 
 import hydra
@@ -23,15 +22,17 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
-from . import resume, rundir
-from .app import run_app
+from cliapp.runner import report, run_app
+from runstore import RunStatus, rundir
+
+from . import resume
 from .interrupts import Interrupts
 from .run import RunResult, hand_off, run_protocol
 from .schema import check_targets, register
 
 log = logging.getLogger("tactile-run")
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
-EXIT_CODES = {"success": 0, "planned": 0, "failed": 1, "aborted": 3}
+EXIT_CODES = {s.value: int(s.exit_code) for s in RunStatus}
 BAD_INPUT = 2
 _exit = {"code": 0}
 
@@ -120,9 +121,7 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
 
 
 def _report(cfg, exc: Exception, what: str) -> None:
-    if cfg.get("verbose"):
-        traceback.print_exception(exc)
-    print(f"{what}: {exc}", file=sys.stderr)
+    report(exc, what, bool(cfg.get("verbose")))
     log.error(f"{what}: {exc}", exc_info=exc)
 
 
@@ -150,7 +149,7 @@ def main() -> None:
 
 class RunDirLock(Callback):
     """One run directory, one writer: lock ``hydra.run.dir`` (``hydra.sweep.dir`` with ``-m``)
-    before Hydra writes anything there (:mod:`protocols.rundir`); a second ``tactile-run``
+    before Hydra writes anything there (:mod:`runstore.rundir`); a second ``tactile-run``
     on the same directory is refused with one line, exit 2, leaving the first one's files alone."""
 
     def on_run_start(self, config, **kwargs) -> None:

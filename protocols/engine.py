@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hardware.errors import DeviceError, ProtectiveStopError
+from runstore.status import RunStatus
 from tactile.slip import CAUSES
 
 from .interlocks import InterlockTripped, Interlocks, SafetyConfig
@@ -32,7 +33,7 @@ from .interrupts import Interrupts
 from .plan import Geometry, Limits, Plan, PlannedStep
 from .steps import Criterion
 
-SUCCESS, ABORTED, FAILED = "success", "aborted", "failed"
+SUCCESS, ABORTED, FAILED = RunStatus.SUCCESS, RunStatus.ABORTED, RunStatus.FAILED
 RETRACT_MM = 20.0
 RETRACT_SPEED = 0.02        # m/s
 SETTLE_S = 5.0              # s, the most a stop may take before we call it a fault
@@ -360,11 +361,7 @@ class RunEngine:
             self.log(f"warning: could not stop the arm: {exc}")
             retract = False
         self._stop_pump()
-        if getattr(self.lab, "stage", None) is not None:
-            try:
-                self.lab.stage.stop()
-            except Exception as exc:              # noqa: BLE001 - never mask the reason we stop
-                self.log(f"warning: could not stop the object stage: {exc}")
+        self._stop_devices()
         if not retract:
             return
         try:
@@ -381,6 +378,24 @@ class RunEngine:
             self.log("retract interrupted: stopped at once")
         except Exception as exc:  # never mask the reason we are stopping
             self.log(f"warning: could not retract safely: {exc}")
+
+    def _stop_devices(self) -> None:
+        """Stop every other device that moves (the object stage, the hand: held where it is,
+        never opened), each on its own: a failure is logged and recorded as a ``fault`` event
+        and the next device is still stopped (as Bluesky's ``_stop_movable_objects``)."""
+        for name, device in self.lab.devices.items():
+            stop = getattr(device, "stop", None)
+            if name in ("arm", "pump") or stop is None:   # stopped first, with their own handling
+                continue
+            try:
+                stop()
+            except Exception as exc:              # noqa: BLE001 - never mask the reason we stop
+                self.log(f"warning: could not stop the {name}: {type(exc).__name__}: {exc}")
+                try:
+                    self.ctx.event("fault", name, {"action": "stop", "error": type(exc).__name__,
+                                                   "message": str(exc)})
+                except Exception:                 # noqa: BLE001 - the recorder may be gone too
+                    pass
 
     def _wait_still(self, timeout_s: float) -> None:
         """Wait (clock time) until the arm is at rest; a bounded wait, never a hang."""

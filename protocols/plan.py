@@ -15,9 +15,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from omegaconf import OmegaConf
 
+from hardware.arm import trapezoid_time
 from hardware.errors import brief
-from hardware.sim.geometry import rotvec_to_matrix
-from hardware.sim.surfaces import Surface, load_surface
+from hardware.transforms import rotvec_to_matrix
+from hardware.surfaces import Surface, load_surface
 from tactile.geometry import fit_ellipsoid, load_taxels
 
 from .steps import Criterion, ProtocolError, Repeat, Step, parse_steps
@@ -240,15 +241,6 @@ class PlanContext(Geometry):
 def _point(p) -> str:
     """A position (m) for a message, to 0.1 mm."""
     return "[" + ", ".join(brief(round(float(v), 4)) for v in p) + "]"
-
-
-def trapezoid_time(distance: float, speed: float, accel: float) -> float:
-    """Duration (s) of a rest-to-rest move with a trapezoidal (or triangular) speed profile."""
-    if distance <= 0:
-        return 0.0
-    if distance < speed ** 2 / accel:
-        return 2.0 * math.sqrt(distance / accel)
-    return distance / speed + speed / accel
 
 
 @dataclass

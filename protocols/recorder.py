@@ -1,18 +1,19 @@
 """The recorder: acquire every stream on its own thread, write the run store as data arrive.
 
-    store = RunStore.create(run_dir / "run.zarr", protocol="straws_sweep", fingers=lab.biotac.fingers)
-    sources = {"biotac": lab.biotac.read, "arm": lab.arm.read_states, "hand": lab.hand.read_states,
-               "pump": lab.pump.read_states, "scale": lab.scale.read}
-    with Recorder(store, sources, lab.clock) as rec:
+    store = RunStore.create(run_dir / "run.zarr", protocol="straws_sweep", fingers=lab.biotac.fingers,
+                            streams=lab.streams())
+    with Recorder(store, lab.sources(), lab.clock) as rec:
         rec.event("step_start", "sweep")
         ...
     # or rec.start() ... rec.stop("success", truth=lab.truth.to_dict())
 
+What a stream's samples become (columns, dtypes, its time coordinate and raw time columns) is
+its sample type's declaration (:mod:`hardware.streams`), kept by the store (``store.streams``).
 One acquisition thread per stream polls its device's non-blocking drain method every
 ``poll_interval_s`` of the device clock (``clock.sleep``, so simulated time is respected)
 and queues the samples; a device error becomes a ``fault`` event and marks the stream
 stale, and the thread keeps retrying. A writer thread converts the queued samples to
-arrays, stamps them with the stream's clock model (:mod:`protocols.clockmodel`), appends
+arrays, stamps them with the stream's clock model (:mod:`runstore.clockmodel`), appends
 them and commits the store every ``flush_interval_s`` of wall time or :data:`RUN_FLUSH_S` of
 the run's own clock time, whichever comes first; a simulated clock faster than real time is
 held back while the last commit is :data:`MAX_BEHIND_S` behind (:meth:`Recorder.keep_up`),
@@ -27,7 +28,6 @@ the same time base as every sample's ``host_time``.
 
 from __future__ import annotations
 
-import json
 import logging
 import threading
 import time
@@ -36,113 +36,16 @@ from typing import Callable
 
 import numpy as np
 
-from hardware.biotac import PAC_RATE_HZ
-from hardware.device import batch_times
 
-from .clockmodel import OnlineClockModel, latency_stats, sequence_gaps
-from .store import RunStore, utc_now
+from runstore import RunStatus, RunStore, utc_now
+from runstore.clockmodel import OnlineClockModel, latency_stats, sequence_gaps
+from runstore.layout import event_columns
 
 log = logging.getLogger(__name__)
 
-STREAMS = ("biotac", "arm", "hand", "pump", "scale", "stage")
 WAKE_S = 0.02                 # wall s between the writer's looks at the clocks
 RUN_FLUSH_S = 0.75            # run s between commits of a clock faster than the wall (a simulated lab)
 MAX_BEHIND_S = 0.95           # run s a free-running (simulated) clock may run ahead of the last commit
-_I16 = np.iinfo(np.int16)
-
-
-# ----------------------------------------------------------------------------- columns
-def _i16(a) -> np.ndarray:
-    """Counts as int16; values beyond int16 (only in corrupted frames, flagged invalid) are clipped."""
-    return np.clip(np.asarray(a), _I16.min, _I16.max).astype(np.int16)
-
-
-def biotac_columns(frames) -> dict[str, np.ndarray]:
-    """BioTac frames → (N,) seq, device_time, host_time (s, raw), valid; (N, F, 24) electrodes;
-    (N, F) pdc, tdc, tac (int16 counts)."""
-    return {"seq": np.array([f.seq for f in frames], np.int64),
-            "device_time": np.array([f.device_time for f in frames], float),
-            "host_time": np.array([f.host_time for f in frames], float),
-            "valid": np.array([f.is_valid() for f in frames], bool),
-            "electrodes": _i16([f.electrodes for f in frames]),
-            "pdc": _i16([f.pdc for f in frames]),
-            "tdc": _i16([f.tdc for f in frames]),
-            "tac": _i16([f.tac for f in frames])}
-
-
-def pac_columns(frames, rate_hz: float = PAC_RATE_HZ, previous: float | None = None) -> dict[str, np.ndarray]:
-    """PAC samples of ``frames`` → (M, F) pac, (M,) device_time, host_time (s, raw).
-
-    A frame's n PAC samples end at the frame's timestamp, 1/rate apart — closer when a
-    frame follows the one before sooner than its samples span (stamps jitter), so the times
-    increase strictly (:func:`hardware.device.batch_times`; ``previous``: the device time of
-    the last PAC sample before these frames); host_time is the frame's.
-    """
-    pac = [np.asarray(f.pac).T for f in frames]                       # (n, F) each
-    counts = [len(p) for p in pac]
-    F = pac[0].shape[1] if pac else 0
-    return {"pac": _i16(np.concatenate(pac)) if pac else np.zeros((0, F), np.int16),
-            "device_time": batch_times([f.device_time for f in frames], counts, 1.0 / rate_hz, previous),
-            "host_time": np.repeat(np.array([f.host_time for f in frames], float), counts)}
-
-
-def arm_columns(states) -> dict[str, np.ndarray]:
-    return {"controller_time": np.array([s.controller_time for s in states], float),
-            "host_time": np.array([s.host_time for s in states], float),
-            "tcp_pose": np.array([s.tcp_pose for s in states], float).reshape(-1, 6),
-            "tcp_speed": np.array([s.tcp_speed for s in states], float).reshape(-1, 6),
-            "tcp_wrench": np.array([s.tcp_wrench for s in states], float).reshape(-1, 6),
-            "protective_stopped": np.array([s.protective_stopped for s in states], bool)}
-
-
-def hand_columns(states) -> dict[str, np.ndarray]:
-    return {"device_time": np.array([s.device_time for s in states], float),
-            "host_time": np.array([s.host_time for s in states], float),
-            "position": np.array([s.position for s in states], float),
-            "target": np.array([s.target for s in states], float)}
-
-
-def pump_columns(states) -> dict[str, np.ndarray]:
-    return {"pump_device_time": np.array([s.device_time for s in states], float),
-            "pump_host_time": np.array([s.host_time for s in states], float),
-            "pump_rate": np.array([s.rate_ml_min for s in states], float),
-            "dispensed": np.array([s.dispensed_ml for s in states], float),
-            "pump_running": np.array([s.running for s in states], bool)}
-
-
-def scale_columns(readings) -> dict[str, np.ndarray]:
-    return {"scale_device_time": np.array([r.device_time for r in readings], float),
-            "scale_host_time": np.array([r.host_time for r in readings], float),
-            "mass": np.array([r.mass_g for r in readings], float),
-            "stable": np.array([r.stable for r in readings], bool)}
-
-
-def stage_columns(states) -> dict[str, np.ndarray]:
-    return {"device_time": np.array([s.device_time for s in states], float),
-            "host_time": np.array([s.host_time for s in states], float),
-            "pose": np.array([s.pose for s in states], float).reshape(-1, 3),
-            "velocity": np.array([s.velocity for s in states], float).reshape(-1, 3),
-            "moving": np.array([s.moving for s in states], bool)}
-
-
-@dataclass(frozen=True)
-class Layout:
-    """Where a stream goes: its store block, its time coordinate and raw time columns."""
-
-    block: str
-    time: str
-    device: str
-    host: str
-    columns: Callable[[list], dict]
-
-
-LAYOUTS = {"biotac": Layout("biotac", "time", "device_time", "host_time", biotac_columns),
-           "arm": Layout("arm", "time_arm", "controller_time", "host_time", arm_columns),
-           "hand": Layout("hand", "time_hand", "device_time", "host_time", hand_columns),
-           "pump": Layout("pump", "time_pump", "pump_device_time", "pump_host_time", pump_columns),
-           "scale": Layout("scale", "time_scale", "scale_device_time", "scale_host_time", scale_columns),
-           "stage": Layout("stage", "time_stage", "device_time", "host_time", stage_columns)}
-PAC_LAYOUT = Layout("biotac_pac", "time_pac", "device_time", "host_time", pac_columns)
 
 
 # ----------------------------------------------------------------------------- state
@@ -164,9 +67,12 @@ class Recorder:
     """Acquire ``sources`` into ``store`` (see module docstring).
 
     Args:
-        store: a freshly created :class:`RunStore` (the recorder closes it in :meth:`stop`).
-        sources: stream name (``biotac``, ``arm``, ``hand``, ``pump``, ``scale``) → the device's
-            non-blocking drain method (``lab.biotac.read``, ``lab.arm.read_states``, ...).
+        store: a freshly created :class:`RunStore` (the recorder closes it in :meth:`stop`);
+            its ``streams`` (the sample types' declarations, :mod:`hardware.streams`) say how
+            samples become columns.
+        sources: stream name (``biotac``, ``arm``, ``hand``, ``pump``, ``scale``, ``stage``, or
+            any other stream the store declares) → the device's non-blocking drain method
+            (``lab.biotac.read``, ``lab.arm.read_states``, ...).
         clock: the devices' :class:`~hardware.device.Clock` (``now()``, ``sleep()``).
         flush_interval_s: wall-clock seconds between commits (with :data:`RUN_FLUSH_S` of
             clock time, whichever comes first: about the most a crash loses).
@@ -181,9 +87,13 @@ class Recorder:
                  flush_interval_s: float = 0.5, poll_interval_s: float = 0.01,
                  retry_interval_s: float = 0.2, min_latency_s: float | dict = 0.0,
                  clock_window_s: float = 1.0):
-        unknown = set(sources) - set(STREAMS)
+        declared = {s.source_name for s in store.streams.values()}
+        unknown = set(sources) - declared
         if unknown:
-            raise ValueError(f"recorder: unknown stream(s) {sorted(unknown)}; expected some of {STREAMS}")
+            raise ValueError(f"recorder: unknown stream(s) {sorted(unknown)}; expected some of {sorted(declared)}")
+        # each source's streams, its own first (biotac, then the biotac_pac derived from its frames)
+        self.streams = {src: sorted((s for s in store.streams.values() if s.source_name == src),
+                                    key=lambda s: s.name != src) for src in sources}
         if not 0 < flush_interval_s <= 1.0:
             raise ValueError(f"flush_interval_s: expected in (0, 1] s, got {flush_interval_s}")
         self.store, self.sources, self.clock = store, dict(sources), clock
@@ -231,7 +141,7 @@ class Recorder:
         self._writer.start()
         return self
 
-    def stop(self, status: str = "success", truth: dict | None = None, attrs: dict | None = None) -> dict:
+    def stop(self, status: str = RunStatus.SUCCESS, truth: dict | None = None, attrs: dict | None = None) -> dict:
         """Drain every source, flush, refit the clock models, rewrite the time coordinates,
         write ``truth`` (the simulator's ground truth, if given) and close the store with
         ``status`` and ``attrs``. Returns :meth:`stats`. Idempotent.
@@ -271,7 +181,7 @@ class Recorder:
                 "time_base": "simulated clock (s); subtract the root attribute t0_clock_s for time since run start"}))
         attrs = dict(attrs or {})
         if errors:
-            status = "failed"
+            status = RunStatus.FAILED
             attrs["recorder_error"] = f"{type(errors[0]).__name__}: {errors[0]}"
             attrs["error"] = "; ".join(filter(None, [f"recording failed: {attrs['recorder_error']}",
                                                      attrs.get("error")]))
@@ -288,11 +198,11 @@ class Recorder:
         if self.stopped:
             return
         if exc_type is None:
-            self.stop("success")
+            self.stop(RunStatus.SUCCESS)
         else:
             if exc is not None:
                 self.event("fault", "exception", {"type": exc_type.__name__, "message": str(exc)})
-            self.stop("aborted" if issubclass(exc_type, KeyboardInterrupt) else "failed")
+            self.stop(RunStatus.ABORTED if issubclass(exc_type, KeyboardInterrupt) else RunStatus.FAILED)
 
     # ------------------------------------------------------------------ engine API
     def now(self) -> float:
@@ -439,7 +349,7 @@ class Recorder:
             if live:
                 self._outbox.setdefault("live", []).extend(live)
             if events:
-                self._outbox.setdefault("events", []).append(_event_columns(events))
+                self._outbox.setdefault("events", []).append(event_columns(events))
             if self._outbox:
                 self.store.append_many({b: _concat(c) for b, c in self._outbox.items()})
                 self._outbox = {}          # kept for the next flush if the append failed
@@ -452,31 +362,33 @@ class Recorder:
                 self._committed.notify_all()
 
     def _convert(self, name: str, samples: list) -> None:
-        lay = LAYOUTS[name]
-        cols = lay.columns(samples)
+        """Columns of every stream of source ``name`` (as its declaration says), stamped with
+        the source's clock model (fitted on its own stream's device and host times)."""
+        own, *derived = self.streams[name]
         model = self.models[name]
-        model.update(cols[lay.device], cols[lay.host])
-        self._stamp(cols, lay, model)
-        self._outbox.setdefault(lay.block, []).append(cols)
+        for stream in (own, *derived):
+            cols = stream.to_columns(samples, self._last_device.get(stream.name, (None,))[0])
+            if stream is own:
+                model.update(cols[own.device_time.name], cols[own.host_time])
+                own_cols = cols
+            self._stamp(cols, stream, model)
+            self._outbox.setdefault(stream.name, []).append(cols)
         if name == "biotac":
-            pac = pac_columns(samples, previous=self._last_device.get(PAC_LAYOUT.block, (None,))[0])
-            self._stamp(pac, PAC_LAYOUT, model)
-            self._outbox.setdefault(PAC_LAYOUT.block, []).append(pac)
-            self._check_frames(cols)
+            self._check_frames(own_cols)
 
-    def _stamp(self, cols: dict, lay: Layout, model: OnlineClockModel) -> None:
+    def _stamp(self, cols: dict, stream, model: OnlineClockModel) -> None:
         """Times since run start of a batch, from the current clock model, never before the
         batch before (the model is refitted as the run goes: a new fit must not move time
         back across a flush; the final refit at :meth:`stop` rewrites all times on one fit)."""
-        d = cols[lay.device]
+        d = cols[stream.device_time.name]
         t = model.map(d) - self.t0
-        last = self._last_device.get(lay.block)
+        last = self._last_device.get(stream.name)
         if last is not None and len(d):
             t = np.maximum(t, last[1] + (d - last[0]))             # continue from the last sample
         if len(d):
-            self._last_device[lay.block] = (float(d[-1]), float(t[-1]))
-        cols[lay.time] = t
-        cols[lay.host] = cols[lay.host] - self.t0
+            self._last_device[stream.name] = (float(d[-1]), float(t[-1]))
+        cols[stream.time] = t
+        cols[stream.host_time] = cols[stream.host_time] - self.t0
 
     def _check_frames(self, cols: dict) -> None:
         """Count and record sequence gaps and invalid frames as events."""
@@ -507,8 +419,8 @@ class Recorder:
             fit = model.final()
             if fit is None:
                 continue
-            for lay in (LAYOUTS[name], PAC_LAYOUT) if name == "biotac" else (LAYOUTS[name],):
-                self.store.transform(lay.block, lay.time, lay.device, lambda d, fit=fit: fit(d) - self.t0)
+            for s in self.streams[name]:
+                self.store.transform(s.name, s.time, s.device_time.name, lambda d, fit=fit: fit(d) - self.t0)
         self.store.commit()
 
     def _summary(self) -> dict:
@@ -518,26 +430,19 @@ class Recorder:
             entry = {k: st[k] for k in ("samples", "gaps", "missing", "invalid", "faults")}
             fit = self.models[name].current()
             if fit is not None:
-                lay = LAYOUTS[name]
-                step = max(1, self.store.length(lay.block) // 100_000)      # bounded memory
-                d = self.store.read(lay.block, lay.device, step)
-                h = self.store.read(lay.block, lay.host, step) + self.t0
+                own = self.streams[name][0]
+                step = max(1, self.store.length(own.name) // 100_000)      # bounded memory
+                d = self.store.read(own.name, own.device_time.name, step)
+                h = self.store.read(own.name, own.host_time, step) + self.t0
                 entry["clock_model"] = {"offset_s": fit.offset_s, "drift_ppm": fit.drift * 1e6,
                                         "windows": fit.n_windows, "windows_used": fit.n_used,
                                         "min_latency_s": self.models[name].min_latency_s,
                                         "residual_latency": latency_stats(fit, d, h)}
             out[name] = entry
-            group = self.store.schema[LAYOUTS[name].block].group
-            self.store.set_group_attrs(group, **{f"{name}_stream": entry} if group == "pour" else {"stream": entry})
+            group = self.streams[name][0].group
+            shared = sum(s.group == group for s in self.store.streams.values()) > 1     # pour: pump and scale
+            self.store.set_group_attrs(group, **{f"{name}_stream": entry} if shared else {"stream": entry})
         return out
-
-
-def _event_columns(events: list[tuple]) -> dict[str, np.ndarray]:
-    return {"time": np.array([e[0] for e in events], float),
-            "kind": np.array([str(e[1]) for e in events], dtype=object),
-            "name": np.array([str(e[2]) for e in events], dtype=object),
-            "detail": np.array(["" if e[3] is None else json.dumps(e[3], default=str) for e in events],
-                               dtype=object)}
 
 
 def _concat(cols: list[dict]) -> dict[str, np.ndarray]:

@@ -18,19 +18,18 @@ from tqdm import tqdm
 from hardware.errors import ConfigError
 from tactile.frames import DEFAULT_VIEWS
 from tactile.geometry import load_taxels
+from runstore import RunStore, provenance, rundir, utc_now
 from tactile.pipeline import TactileModel
 
-from . import provenance, rundir
 from .calibration import session_baseline, store_baseline
 from .engine import FAILED, Outcome, RunEngine
 from .interrupts import Interrupts
-from .lab import check_hardware, make_lab
+from .backends import check_hardware, make_lab
 from .live import (LiveConfig, LiveMonitor, live_fingers, live_settings, open_viewer, tactile_config, terminal_display,
                    viewer_names, warm_up)
 from .plan import Plan, format_timeline, make_plan
 from .recorder import Recorder
 from .steps import ProtocolError
-from .store import RunStore, utc_now
 
 ANALYSIS_ENTRY_POINTS = "tactile_flow.analysis"
 
@@ -67,7 +66,6 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
 
     lab = make_lab(cfg)
     baseline = session_baseline(cfg.hardware, lab)
-    stage = getattr(lab, "stage", None)
     own = interrupts is None
     interrupts = interrupts or Interrupts(console)
     store_path = run_dir / "run.zarr"
@@ -80,15 +78,11 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
                                     attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
                                            "tare": bool(cfg.protocol.get("tare", True))},
                                     live=(live_fingers(live, lab.biotac.fingers), model.config.views)
-                                    if model else None, stage=stage is not None)
+                                    if model else None, streams=lab.streams())
             stored = store_baseline(store, baseline, lab.biotac.fingers)
             if getattr(lab, "truth", None) is not None:
                 lab.truth.conditions = _conditions(cfg, lab, stored, plan)
-            sources = {"biotac": lab.biotac.read, "arm": lab.arm.read_states, "hand": lab.hand.read_states,
-                       "pump": lab.pump.read_states, "scale": lab.scale.read}
-            if stage is not None:
-                sources["stage"] = stage.read_states
-            recorder = Recorder(store, sources, lab.clock)
+            recorder = Recorder(store, lab.sources(), lab.clock)
             monitor, outcome = None, Outcome(FAILED, "the run engine could not start")
             try:
                 if not plan.setup:

@@ -4,7 +4,7 @@
 every key of the composed config is checked against these dataclasses before anything
 runs: an unknown key or a value of the wrong type is a composition error naming the key.
 The ``hardware`` and ``surface`` groups are validated by their own schemas when the lab
-is built (:func:`protocols.lab.make_lab`; with ``plan_only``, :func:`protocols.lab.check_hardware`), before
+is built (:func:`protocols.backends.make_lab`; with ``plan_only``, :func:`protocols.backends.check_hardware`), before
 anything moves.
 
 Protocol units are the ones a researcher writes: mm, mm/s, mm/s², s, N, ml, ml/min, rad.

@@ -6,6 +6,46 @@ import pytest
 #: the real recordings the tests read (shipped with the project; attribution in DATA / "README.md")
 DATA = Path(__file__).resolve().parent / "data"
 
+# ----------------------------------------------------------------------------- test tiers
+# `pytest` runs the fast tier (`-m 'not soak and not slow'`, pyproject.toml); `pytest -m "not soak"`
+# runs everything (what CI runs, .ci/run). `realtime` tests wait on wall-clock emulators in other
+# processes (they are also `slow`); `slow` ones run subprocesses, whole simulated runs with their
+# analysis, or take more than a few seconds. Marks in a test module add to these tables.
+#: test modules against the wall-clock emulators (UR controller, rosbridge, serial devices)
+REALTIME_MODULES = {"test_ur10.py", "test_lab_emulated.py", "test_rosbridge.py", "test_serial_pour.py",
+                    "test_serial_biotac.py"}
+#: test modules of whole runs, analyses and command-line processes
+SLOW_MODULES = {"test_reactive.py", "test_slip_in_place.py", "test_analysis_runs.py", "test_import_hostile.py",
+                "test_cli.py", "test_faults.py", "test_hostile_input.py", "test_real_contact.py"}
+#: single slow tests of otherwise fast modules (node id prefixes)
+SLOW_TESTS = ("tests/test_geometry.py::test_accurate_geodesic_matches_principal_section_arc",
+              "tests/test_recorder.py::test_clock_model_matches_the_simulators_sample_times",
+              "tests/test_recorder.py::test_sigkill_leaves_a_consistent_store_missing_at_most_one_second",
+              "tests/test_guides.py::test_first_session_runs_plan_without_hardware",
+              "tests/test_guides.py::test_the_copied_protocol_plans_as_the_guide_shows",
+              "tests/test_guides.py::test_step_table_matches_the_code",
+              "tests/test_guides.py::test_a_board_of_your_own_plans",
+              "tests/test_interlocks.py::test_protective_stop_mid_sweep_aborts_or_recovers_per_config",
+              "tests/test_interlocks.py::test_a_short_dropout_under_the_stale_limit_does_not_stop_the_run",
+              "tests/test_protocols.py::test_pour_holds_until_the_bottle_has_slipped_out",
+              "tests/test_sim_contact.py::test_the_shipped_calibration_is_what_the_script_derives_from_the_test_data",
+              "tests/test_sim_determinism.py::test_same_seed_is_bit_identical_and_other_seeds_differ",
+              "tests/test_online.py::test_memory_stays_flat_over_many_pushes",
+              "tests/test_import_csv.py::test_recording_that_starts_in_contact_keeps_its_pressure_with_a_stored_calibration",
+              "tests/test_viewer.py::test_bad_input_is_one_line_and_exit_2",
+              "tests/test_viewer.py::test_the_core_packages_never_import_rerun",
+              "tests/test_architecture.py::test_importing_a_package_loads_nothing_above_it")
+
+
+@pytest.hookimpl(tryfirst=True)              # before `-m` deselects
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.name in REALTIME_MODULES or item.get_closest_marker("realtime"):
+            item.add_marker(pytest.mark.realtime)
+            item.add_marker(pytest.mark.slow)
+        elif item.path.name in SLOW_MODULES or item.nodeid.startswith(SLOW_TESTS):
+            item.add_marker(pytest.mark.slow)
+
 
 @pytest.fixture(scope="session")
 def cache_dir(tmp_path_factory):

@@ -119,7 +119,7 @@ def test_sigkill_leaves_a_store_with_all_but_the_last_second(tmp_path):
     assert tree["arm"].sizes["time_arm"] > 0 and len(tree["events"]["kind"]) >= 3
 
     # tactile-recover closes it as crashed; it then opens like any other run.
-    from protocols.recover import main as recover_main
+    from runstore.recover import main as recover_main
     assert recover_main([str(store)]) == 0
     tree = xr.open_datatree(store, engine="zarr")
     assert tree.attrs["status"] == "crashed" and tree.attrs["last_sample_s"] == pytest.approx(last, abs=0.05)

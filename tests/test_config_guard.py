@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from protocols.config_guard import ConfigFileError, check_overrides, check_text
+from cliapp.config_guard import ConfigFileError, check_overrides, check_text
 
 PY = [sys.executable, "-c", "from protocols.cli import main; main()"]
 CLI = [*PY, "analyze=false", "progress=false"]

@@ -15,7 +15,7 @@ import pytest
 pytestmark = pytest.mark.slow
 RUN = [sys.executable, "-c", "from protocols.cli import main; main()", "progress=false", "analyze=false"]
 ANALYZE = [sys.executable, "-c", "from analysis.cli import main; main()", "analysis.figures=false"]
-RECOVER = [sys.executable, "-c", "from protocols.recover import main; import sys; sys.exit(main())"]
+RECOVER = [sys.executable, "-c", "from runstore.recover import main; import sys; sys.exit(main())"]
 
 
 @pytest.fixture(scope="module")

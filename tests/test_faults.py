@@ -96,8 +96,8 @@ def test_a_full_disk_stops_the_run_and_keeps_what_was_committed(tmp_path, small_
     assert tree.attrs["status"] == "running"                  # it could not even be closed: recovery's job
 
     # tactile-recover on the still-full disk: one line, exit 1, nothing lost; with room, it closes the run
-    from protocols.recover import main as recover_main
-    rec = subprocess.run([sys.executable, "-c", "from protocols.recover import main; import sys; sys.exit(main())",
+    from runstore.recover import main as recover_main
+    rec = subprocess.run([sys.executable, "-c", "from runstore.recover import main; import sys; sys.exit(main())",
                           str(store)], capture_output=True, text=True, timeout=120)
     assert rec.returncode == 1 and "Traceback" not in rec.stderr and len(rec.stderr.strip().splitlines()) == 1
     assert "could not be written" in rec.stderr and "nothing was lost" in rec.stderr

@@ -239,7 +239,7 @@ def test_the_new_step_kind_plans_runs_and_enters_the_table(tmp_path):
 
 
 def test_surface_keys_table_lists_every_config_key():
-    from hardware.sim.surfaces import KINDS, SurfaceConfig
+    from hardware.surfaces import KINDS, SurfaceConfig
     text = guide("surfaces.md")
     table = text.split("## The keys (`SurfaceConfig`)")[1].split("\n\n")[1]
     keys = {line.split("`")[1] for line in table.splitlines()[2:]}

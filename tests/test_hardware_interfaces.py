@@ -8,7 +8,7 @@ import pytest
 from hardware.arm import Arm
 from hardware.biotac import TactileSensors
 from hardware.device import Clock, DeviceIdentity, WallClock
-from hardware.errors import NotConnectedError
+from hardware.errors import DeviceError, NotConnectedError
 from hardware.hand import JOINT_NAMES, Hand
 from hardware.pour import Pump, Scale
 from hardware.sim import make_sim_lab
@@ -87,3 +87,80 @@ def test_only_the_driver_thread_advances_simulated_time():
         assert lab.clock.now() == 0.0     # pollers waited, never stepped the world
         lab.clock.sleep(1.0)
         assert lab.clock.now() == pytest.approx(1.0)
+
+
+# ------------------------------------------------------------------ every driver, real or simulated
+def _drivers():
+    from hardware.serial_biotac import SerialBiotacs
+    from hardware.serial_pour import SerialPump, SerialScale
+    from hardware.shadow import RosbridgeBiotacs, ShadowHand
+    from hardware.sim import SimArm, SimBiotac, SimHand, SimPump, SimScale, SimStage
+    from hardware.stage import ObjectStage
+    from hardware.ur10 import UR10Arm
+    return [(UR10Arm, Arm), (SimArm, Arm), (ShadowHand, Hand), (SimHand, Hand),
+            (RosbridgeBiotacs, TactileSensors), (SerialBiotacs, TactileSensors), (SimBiotac, TactileSensors),
+            (SerialPump, Pump), (SimPump, Pump), (SerialScale, Scale), (SimScale, Scale), (SimStage, ObjectStage)]
+
+
+@pytest.mark.parametrize("driver, interface", _drivers(), ids=lambda c: getattr(c, "__name__", ""))
+def test_every_driver_implements_its_whole_interface_and_declares_what_it_records(driver, interface):
+    import inspect
+
+    assert issubclass(driver, interface) and not inspect.isabstract(driver), inspect.getattr_static(
+        driver, "__abstractmethods__", ())
+    assert driver.kind == interface.kind and driver.sample_type is interface.sample_type
+    streams = interface.sample_type.describe()
+    assert streams and streams[0].name == interface.kind           # the store block is the device's name
+    fields = set(interface.sample_type.__dataclass_fields__) | {"is_valid"}
+    for stream in streams:
+        for column in (stream.device_time, *stream.columns):
+            assert (column.source or column.name) in fields, f"{stream.name}/{column.name}: no sample attribute"
+            assert column.dims[0] == stream.time and column.units is not None
+
+
+def test_what_a_device_declares_is_what_its_samples_give():
+    """The columns a sample type declares, made from a real simulated device's samples, have
+    the declared dtypes and the shapes of their dimensions."""
+    with make_sim_lab({"seed": 2, "fingers": ["ff", "th"]}) as lab:
+        lab.clock.sleep(0.2)
+        streams, sources = lab.streams(), lab.sources()
+        assert set(sources) == {"arm", "hand", "biotac", "pump", "scale"} | ({"stage"} if lab.stage else set())
+        assert set(streams) == set(sources) | {"biotac_pac"}
+        sizes = {"finger": 2, "taxel": 24, "axis6": 6, "joint": 24, "stage_axis": 3}
+        for name, read in sources.items():
+            samples = read()
+            for stream in (s for s in streams.values() if s.source_name == name):
+                cols = stream.to_columns(samples)
+                n = len(cols[stream.device_time.name])
+                assert n >= len(samples) > 0
+                for column in stream.columns:
+                    a = cols[column.name]
+                    assert a.shape == (n, *(sizes[d] for d in column.dims[1:])), (stream.name, column.name)
+                    assert a.dtype == np.dtype(column.dtype), (stream.name, column.name)
+
+
+def test_hand_stop_holds_every_joint_where_it_is():
+    with make_sim_lab({}) as lab:
+        lab.hand.move_to({"rh_FFJ3": 1.0}, duration=1.0, wait=False)
+        lab.clock.sleep(0.4)
+        lab.hand.stop()
+        held = lab.hand.positions()["rh_FFJ3"]
+        lab.clock.sleep(0.6)
+        assert 0.2 < held < 0.8                                  # stopped on the way
+        assert lab.hand.positions()["rh_FFJ3"] == pytest.approx(held, abs=0.02)
+
+
+def test_connecting_a_lab_reports_every_failing_device_and_leaves_nothing_open(tmp_path):
+    from hardware.lab_container import Lab
+    from hardware.serial_pour import SerialPump, SerialPumpConfig, SerialScale, SerialScaleConfig
+
+    sim = make_sim_lab({})
+    missing = tmp_path / "no-such-port"
+    lab = Lab(arm=sim.arm, hand=sim.hand, biotac=sim.biotac, clock=sim.clock,
+              pump=SerialPump(SerialPumpConfig(port=str(missing)), sim.clock),
+              scale=SerialScale(SerialScaleConfig(port=str(missing)), sim.clock))
+    with pytest.raises(DeviceError) as err:                    # the first failure's own type
+        lab.connect()
+    assert set(err.value.failures) == {"pump", "scale"}
+    assert str(missing) in str(err.value) and "also failed to connect: scale: " in str(err.value)
+    assert not any(d.is_connected for d in lab.devices.values())

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from protocols.importers import ImportSettings, import_source, read_bag, select_fingers
+from importers import ImportSettings, import_source, read_bag, select_fingers
 from tactile.signals import SensorCalibration
 from analysis.run import analyze_run
 from conftest import DATA
@@ -66,7 +66,7 @@ def test_per_finger_prefixes_with_time_column(rest, tmp_path):
     np.testing.assert_array_equal(b["seq"].values, np.arange(rest.n_frames))
     assert dt["biotac_pac"].sizes["time_pac"] == 0
     assert dt.attrs["import"]["reader"]["rate_source"] == "time column"
-    assert dt.attrs["provenance"]["importer"]["reader"] == "protocols.importers.csv.read_csv"
+    assert dt.attrs["provenance"]["importer"]["reader"] == "importers.csv.read_csv"
 
 
 def test_electrode_only_file_with_rate(rest, tmp_path):

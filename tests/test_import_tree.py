@@ -14,11 +14,11 @@ import pytest
 import xarray as xr
 
 from conftest import DATA
-from protocols.importers import ImportInputError, ImportSettings, import_source, read_bag, select_fingers
-from protocols.importers.importer import ImportIncomplete
+from importers import ImportInputError, ImportSettings, import_source, read_bag, select_fingers
+from importers.importer import ImportIncomplete
 from test_import_csv import write_csv
 
-IMPORT = [sys.executable, "-c", "from protocols.importers.cli import main; main()"]
+IMPORT = [sys.executable, "-c", "from importers.cli import main; main()"]
 ANALYZE = [sys.executable, "-c", "from analysis.cli import main; main()"]
 
 

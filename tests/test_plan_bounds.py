@@ -11,7 +11,7 @@ import xarray as xr
 from hydra import compose, initialize_config_dir
 
 from hardware.errors import ConfigError
-from protocols.lab import check_hardware
+from protocols.backends import check_hardware
 from protocols.plan import make_plan
 from protocols.run import run_protocol
 from protocols.schema import register

@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
@@ -30,6 +31,25 @@ def test_every_protocol_plans_and_names_its_labels(protocol):
     assert plan.labels
     text = format_timeline(plan)
     assert protocol in text and all(p.step.kind in text for p in plan.steps)
+
+
+@pytest.mark.parametrize("protocol", ["straws_sweep", "sticks_sweep", "pour_grasp"])
+def test_every_protocol_s_timeline_is_contiguous_inside_the_workspace_and_labelled_as_declared(protocol):
+    cfg = _cfg(f"protocol={protocol}")
+    plan = make_plan(cfg)
+    assert plan.protocol == protocol and plan.labels == list(cfg.protocol.labels)
+    assert [p.index for p in plan.steps] == list(range(len(plan.steps)))
+    assert plan.steps[0].start == 0.0
+    for before, after in zip(plan.steps, plan.steps[1:]):      # each step starts where the one before ends
+        assert after.start == pytest.approx(before.start + before.duration)
+    assert plan.duration == pytest.approx(sum(p.duration for p in plan.steps))
+    assert all(p.duration >= 0 for p in plan.steps)
+    lo, hi = (np.array(cfg.hardware.workspace[k]) for k in ("min_m", "max_m"))
+    points = np.array([w[:3] for p in plan.steps for w in p.waypoints]).reshape(-1, 3)
+    assert np.all(points >= lo - 1e-9) and np.all(points <= hi + 1e-9)
+    assert len(points) or "sweep" not in protocol                 # a sweep moves
+    moving = [p for p in plan.steps if p.waypoints]
+    assert all(p.duration > 0 for p in moving)                  # a move takes time
 
 
 def test_one_protocol_serves_every_board():

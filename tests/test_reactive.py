@@ -163,8 +163,8 @@ BAG = DATA / "biotac_rest_untouched.bag"
 def test_no_false_alarm_on_the_resting_recording(model):
     from dataclasses import replace
 
-    from protocols.importers.bag import read_bag
-    from protocols.importers.recording import select_fingers
+    from importers.bag import read_bag
+    from importers.recording import select_fingers
     from protocols.live import replay
     from tactile import signals
     from tactile.pipeline import TactileModel

@@ -19,7 +19,7 @@ from analysis.pipeline import analyse
 from analysis.preprocess import despike
 from analysis.run import analyze_run
 from analysis.slip import CLASSES
-from protocols.importers import ImportSettings, import_source, read_bag, select_fingers
+from importers import ImportSettings, import_source, read_bag, select_fingers
 from tactile import aggregate as tagg
 from tactile import contact, signals
 from tactile.pipeline import TactileConfig, TactileModel, process_view

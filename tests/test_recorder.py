@@ -15,7 +15,7 @@ from hardware.biotac import BiotacFrame
 from hardware.device import WallClock
 from hardware.sim import make_sim_lab
 from hardware.sim.scenarios import pad_height_pose
-from protocols.clockmodel import (OnlineClockModel, fit_envelope, sequence_gaps, window_minima)
+from runstore.clockmodel import (OnlineClockModel, fit_envelope, sequence_gaps, window_minima)
 from protocols.recorder import Recorder
 from protocols.store import RunStore, open_run
 

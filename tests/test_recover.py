@@ -7,7 +7,7 @@ import numpy as np
 import xarray as xr
 import zarr
 
-from protocols.recover import main, recover
+from runstore.recover import main, recover
 from protocols.store import RunStore
 
 from test_store import F, arm_rows, biotac_rows

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from protocols import rundir
+from runstore import rundir
 from protocols.interrupts import Interrupts
-from protocols.recover import main as recover_main
+from runstore.recover import main as recover_main
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = [sys.executable, "-c", "from protocols.cli import main; main()", "progress=false"]
@@ -175,7 +175,7 @@ def test_recover_refuses_a_run_that_is_still_recording(tmp_path):
     store = tmp_path / "run" / "run.zarr"
     wait_for(lambda: store.exists() or proc.poll() is not None)
     time.sleep(1.0)
-    rec = subprocess.run([sys.executable, "-c", "from protocols.recover import main; import sys; sys.exit(main())",
+    rec = subprocess.run([sys.executable, "-c", "from runstore.recover import main; import sys; sys.exit(main())",
                           str(store)], capture_output=True, text=True, timeout=60)
     assert rec.returncode == 2 and f"pid {proc.pid}" in rec.stderr and "in use" in rec.stderr, rec.stderr
     assert xr.open_datatree(store, engine="zarr").attrs["status"] == "running"

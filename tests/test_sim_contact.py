@@ -47,8 +47,8 @@ def test_the_shipped_calibration_is_what_the_script_derives_from_the_test_data(c
 def test_the_unloaded_estimate_finds_the_rest_of_a_sensor_at_rest():
     """On the real resting bag (every row unloaded) the estimator returns the rest level within
     its stated uncertainty plus the noise's upper tail (it takes a 90th percentile)."""
-    from protocols.importers.bag import read_bag
-    from protocols.importers.recording import select_fingers
+    from importers.bag import read_bag
+    from importers.recording import select_fingers
 
     rec, _ = select_fingers(read_bag(DATA / "biotac_rest_untouched.bag"))
     rng = np.random.default_rng(0)

@@ -5,112 +5,20 @@
                                          # under /tmp/tactile-emulate/
     tactile-run hardware=lab_emulated    # in another terminal
 
-Every emulator runs as a separate process (ur_rtde's constructors hold the GIL, so an
-emulator thread inside the client's process can deadlock), prints one ``READY ...`` line
-when it listens, and is stopped by its PID. :class:`EmulatorProcess` is that contract,
-used by the emulators' context managers and by the tests.
+Every emulator runs as a separate process (:class:`hardware.emulators.process.EmulatorProcess`).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import queue
 import signal
-import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 HOME_POSE = (0.3, 0.0, 0.2, 3.141592653589793, 0.0, 0.0)    # hardware.arm.home_pose of conf/hardware/lab.yaml
 DEFAULT_LINK_DIR = os.environ.get("TACTILE_EMULATE_DIR", "/tmp/tactile-emulate")
-
-
-class EmulatorError(RuntimeError):
-    """An emulator process did not start, or did not answer a control command."""
-
-
-class EmulatorProcess:
-    """A ``python -m <module> <args>`` child: waits for its READY line, sends control commands
-    on its stdin, stops it by PID.
-
-    ``ready`` holds the READY line's ``key=value`` fields (addresses, ports, pty paths).
-    """
-
-    def __init__(self, module: str, args=(), ready_timeout_s: float = 20.0):
-        self.module, self.args = module, [str(a) for a in args]
-        self.ready_timeout_s = ready_timeout_s
-        self.proc: subprocess.Popen | None = None
-        self.ready: dict[str, str] = {}
-        self._lines: queue.Queue[str | None] = queue.Queue()
-
-    @property
-    def pid(self) -> int:
-        return self.proc.pid
-
-    def start(self) -> "EmulatorProcess":
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-        self.proc = subprocess.Popen([sys.executable, "-m", self.module, *self.args], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
-        threading.Thread(target=self._pump_stdout, daemon=True).start()
-        line = self._expect("READY", self.ready_timeout_s)
-        self.ready = dict(f.split("=", 1) for f in line.split()[1:] if "=" in f)
-        return self
-
-    def command(self, text: str, timeout_s: float = 5.0) -> str:
-        """Send one control line; return the emulator's ``OK ...`` reply (``ERR ...`` raises)."""
-        try:
-            self.proc.stdin.write(text + "\n")
-            self.proc.stdin.flush()
-        except (BrokenPipeError, OSError) as exc:
-            raise EmulatorError(f"{self.module}: cannot send {text!r}: {exc}") from exc
-        line = self._expect(("OK", "ERR"), timeout_s)
-        if line.startswith("ERR"):
-            raise EmulatorError(f"{self.module}: {text!r} → {line}")
-        return line[2:].strip()
-
-    def kill(self) -> None:
-        """SIGKILL, as a crash would (no goodbye on any socket or pty)."""
-        if self.proc and self.proc.poll() is None:
-            os.kill(self.proc.pid, signal.SIGKILL)
-            self.proc.wait(timeout=5)
-
-    def stop(self) -> None:
-        """SIGTERM, then SIGKILL after 3 s."""
-        if self.proc is None or self.proc.poll() is not None:
-            return
-        os.kill(self.proc.pid, signal.SIGTERM)
-        try:
-            self.proc.wait(timeout=3)
-        except subprocess.TimeoutExpired:
-            self.kill()
-
-    def __enter__(self):
-        return self.start()
-
-    def __exit__(self, *exc):
-        self.stop()
-
-    def _pump_stdout(self) -> None:
-        for line in self.proc.stdout:
-            self._lines.put(line.rstrip("\n"))
-        self._lines.put(None)
-
-    def _expect(self, prefixes, timeout_s: float) -> str:
-        prefixes = (prefixes,) if isinstance(prefixes, str) else tuple(prefixes)
-        end, seen = time.monotonic() + timeout_s, []
-        while True:
-            try:
-                line = self._lines.get(timeout=max(0.0, end - time.monotonic()))
-            except queue.Empty:
-                raise EmulatorError(f"{self.module}: no {'/'.join(prefixes)} line within {timeout_s} s; "
-                                    f"output: {seen[-10:]}") from None
-            if line is None:
-                raise EmulatorError(f"{self.module}: exited (code {self.proc.wait()}); output: {seen[-10:]}")
-            if line.startswith(prefixes):
-                return line
-            seen.append(line)
 
 
 def _ur_emulator(host: str, home_pose):

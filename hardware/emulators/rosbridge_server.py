@@ -30,7 +30,7 @@ import numpy as np
 
 from ..biotac import FINGERS
 from ..hand import JOINT_NAMES
-from .cli import EmulatorProcess
+from .process import EmulatorProcess
 
 UNCONNECTED = {"pac0": 0, "pac1": 0, "pac": [], "pdc": -22072, "tac": 32570, "tdc": 0, "electrodes": [0] * 24}
 TOPIC_TYPES = {"/rh/tactile": "sr_robot_msgs/BiotacAll", "/joint_states": "sensor_msgs/JointState",

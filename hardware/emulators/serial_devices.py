@@ -35,7 +35,7 @@ import numpy as np
 from ..biotac import FINGERS
 from ..serial_biotac import encode_frame
 from ..serial_pour import format_weight_line
-from .cli import EmulatorProcess
+from .process import EmulatorProcess
 
 FIRMWARE = "2.4-emulated"
 
@@ -156,7 +156,7 @@ class BiotacBridge:
 
 
 # ============================================================================ pump and scale
-class PumpState:
+class EmulatedPump:
     """Shared by the pump (which changes it) and the scale (which weighs the reservoir)."""
 
     def __init__(self, max_rate_ml_min: float):
@@ -184,7 +184,7 @@ class PumpState:
 class PumpDevice:
     """EZO-PMP-like command interpreter on a pty (commands and replies end with CR)."""
 
-    def __init__(self, state: PumpState):
+    def __init__(self, state: EmulatedPump):
         self.pty = Pty("pump")
         self.state = state
         self.commands = 0
@@ -254,7 +254,7 @@ class PumpDevice:
 class ScaleDevice:
     """A&D-like balance streaming weight lines at ``rate_hz``; ``T`` tares (ACK reply)."""
 
-    def __init__(self, state: PumpState, reservoir_g: float = 1500.0, rate_hz: float = 10.0,
+    def __init__(self, state: EmulatedPump, reservoir_g: float = 1500.0, rate_hz: float = 10.0,
                  noise_g: float = 0.05, seed: int = 0):
         self.pty = Pty("scale")
         self.state, self.reservoir_g, self.noise_g = state, reservoir_g, noise_g
@@ -290,7 +290,7 @@ class SerialLab:
     def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0,
                  pump_max_rate_ml_min: float = 150.0, reservoir_g: float = 1500.0):
         self.biotac = BiotacBridge(fingers, rate_hz, seed)
-        self.pump_state = PumpState(pump_max_rate_ml_min)
+        self.pump_state = EmulatedPump(pump_max_rate_ml_min)
         self.pump = PumpDevice(self.pump_state)
         self.scale = ScaleDevice(self.pump_state, reservoir_g, seed=seed)
         self.devices = {"biotac": self.biotac, "pump": self.pump, "scale": self.scale}

@@ -13,7 +13,7 @@ What ur_rtde talks to on a real robot, rebuilt from the protocols (no ur_rtde co
   answered with the real controller's strings.
 - **Script port** 30003: accepts URScript programs. The ``rtde_control`` program that
   ur_rtde uploads is not interpreted as text: its register handshake is emulated in Python
-  (:class:`_ControlScript`): the client writes a command id into ``input_int_register_0``
+  (:class:`ControlScript`): the client writes a command id into ``input_int_register_0``
   (arguments in the other input registers), the script answers 1 (ready) / 2 (done) in
   ``output_int_register_0``, async progress in ``output_int_register_2``.
 - Motion: :class:`hardware.emulators.ur_motion.Kinematics` (Cartesian only, no joints).
@@ -35,11 +35,9 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import select
 import signal
 import socket
 import struct
-import subprocess
 import sys
 import threading
 import time
@@ -48,22 +46,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import ur_wire as wire
+from .ur_servers import DashboardServer, RtdeServer, RtdeSession, listener
+from .ur_wire import (BIT_NORMAL, BIT_POWER_ON, BIT_PROGRAM_RUNNING, BIT_PROTECTIVE, BIT_STOPPED_DUE_TO_SAFETY,
+                      DASHBOARD_PORT, PLAYING, ROBOT_MODE_RUNNING, RTDE_PORT, SAFETY_NORMAL,
+                      SAFETY_PROTECTIVE_STOP, SCRIPT_PORT, STOPPED)
+from .process import EmulatorProcess
+from .ur_script import ControlScript, log_line
 from .ur_motion import Contact, Kinematics
 
-DASHBOARD_PORT, SCRIPT_PORT, RTDE_PORT = 29999, 30003, 30004
 
-# runtime_state, robot_mode, safety_mode values (UR RTDE guide)
-STOPPED, PLAYING = 1, 2
-ROBOT_MODE_RUNNING = 7
-SAFETY_NORMAL, SAFETY_PROTECTIVE_STOP = 1, 3
-# safety_status_bits
-BIT_NORMAL, BIT_PROTECTIVE, BIT_STOPPED_DUE_TO_SAFETY = 1 << 0, 1 << 2, 1 << 10
-# robot_status_bits
-BIT_POWER_ON, BIT_PROGRAM_RUNNING = 1 << 0, 1 << 1
-
-READY_FOR_CMD, DONE_WITH_CMD = 1, 2
-#: commands the control script processes without waiting for the client to clear them
-REALTIME_CMDS = {6, 9, 10, 11, 24, 25, 26, 27, 38, 58, 66, 67, 68, 69, 70, 71}
 
 
 @dataclass
@@ -101,215 +92,8 @@ class URControllerConfig:
     log: bool = False
 
 
-def _log(cfg, *msg):
-    if cfg.log:
-        print("ur_controller:", *msg, file=sys.stderr, flush=True)
-
-
-# ============================================================================ script
-class _ControlScript:
-    """The semantics of ur_rtde's ``rtde_control`` URScript program, one control period at a time.
-
-    Holds the registers it reads and writes; the controller calls :meth:`step` once per
-    period while the program runs. A blocking command (sync ``moveL``, ``stopL``...) keeps
-    the script busy until the motion ends, then it signals "done".
-    """
-
-    def __init__(self, ctrl: "URControllerEmulator", reg_offset: int = 0):
-        self.ctrl, self.kin, self.off = ctrl, ctrl.kin, reg_offset
-        self.executing = False
-        self.busy_until = None              # predicate: the blocking command has finished
-        self.async_kind = None              # "move" | "stop" while an async operation runs
-        self.wr_count = 0
-        self.op_id = 0
-        self.keep_running = True
-        self.speeding = None                # (velocity, accel) while the speed thread runs
-        self._async_register(-1)
-        self._ready()
-
-    # -- registers -------------------------------------------------------------------
-    def _in_int(self, i):
-        return self.ctrl.in_int[i + self.off]
-
-    def _in_double(self, i):
-        return self.ctrl.in_double[i + self.off]
-
-    def _pose(self, first=0):
-        return np.array([self._in_double(first + k) for k in range(6)])
-
-    def _out_int(self, i, v):
-        self.ctrl.out_int[i + self.off] = int(v)
-
-    def _ready(self):
-        self._out_int(0, READY_FOR_CMD)
-
-    def _done(self):
-        self._out_int(0, DONE_WITH_CMD)
-
-    def _async_register(self, value):
-        """Progress word: change count bits 16-23, operation id bits 24-30, running bit 15."""
-        self.wr_count = (self.wr_count + 1) % 128
-        if value == 0:
-            self.op_id = (self.op_id + 1) % 128
-        reg = self.wr_count * 65536 + self.op_id * 16777216
-        if value >= 0:
-            reg += min(value, 32767) + 32768
-        self._out_int(2, reg)
-
-    def _async_started(self, kind):
-        self.async_kind = kind
-        self._async_register(0)
-
-    def _async_finished(self):
-        if self.async_kind is not None:
-            self.async_kind = None
-            self._async_register(-1)
-
-    # -- one control period --------------------------------------------------------
-    def step(self) -> None:
-        if self.async_kind == "move" and self.kin.mode != "linear":
-            self._async_finished()
-        elif self.async_kind == "stop" and self.kin.mode == "idle":
-            self._async_finished()
-        if self.speeding is not None and self.kin.mode != "speed":
-            self.kin.speed_linear(*self.speeding)        # the script's speed thread re-issues speedl
-        if self.busy_until is not None:
-            if not self.busy_until():
-                return
-            self.busy_until = None
-            self._done()
-            return
-        cmd = self._in_int(0)
-        if cmd in REALTIME_CMDS:
-            self._process(cmd)
-            self._ready()
-        elif cmd == 0:
-            self.executing = False
-            self._ready()
-        elif not self.executing:
-            self.executing = True
-            self._process(cmd)
-            if cmd != 255 and self.busy_until is None:
-                self._done()
-
-    def _block_until_idle(self):
-        self.busy_until = lambda: self.kin.mode == "idle"
-
-    def _stop_async_move(self):
-        if self.async_kind == "move":
-            self._async_finished()
-
-    def _process(self, cmd: int) -> None:
-        kin, c = self.kin, self.ctrl
-        if cmd in (2, 3):                                   # moveJ_IK, moveL (pose targets)
-            pose, speed, accel, asynchronous = self._pose(0), self._in_double(6), self._in_double(7), self._in_int(1)
-            self._stop_async_move()
-            kin.move_linear(pose, speed, accel)
-            if asynchronous == 1:
-                self._async_started("move")
-            else:
-                self.busy_until = lambda: kin.mode != "linear"
-        elif cmd == 6:                                      # forceMode
-            selection = [self._in_int(2 + i) for i in range(6)]
-            kin.force = (self._pose(0), selection, self._pose(6), self._pose(12))
-        elif cmd == 7:                                      # forceModeStop: end_force_mode(); stopl(10)
-            kin.force = None
-            kin.stop(10.0)
-            self._block_until_idle()
-        elif cmd == 8:                                      # zeroFtSensor
-            kin.zero_ft()
-        elif cmd == 10:                                     # speedL (a thread repeating speedl)
-            self.speeding = (self._pose(0), self._in_double(6))
-            kin.speed_linear(*self.speeding)
-        elif cmd == 24:                                     # servoL
-            kin.servo(self._pose(0), self._in_double(9))
-        elif cmd in (15, 16):                               # speedStop, servoStop
-            self.speeding = None
-            kin.stop(self._in_double(0))
-            self._block_until_idle()
-        elif cmd == 31:                                     # triggerProtectiveStop
-            c.trigger_protective_stop("protective_stop() from the control script")
-        elif cmd in (33, 34):                               # stopL, stopJ
-            decel, asynchronous = self._in_double(0), self._in_int(1)
-            if self.async_kind == "stop":
-                self._async_finished()
-            else:
-                self._stop_async_move()
-            kin.stop(decel)
-            if asynchronous == 1:
-                self._async_started("stop")
-            else:
-                self._block_until_idle()
-        elif cmd == 47:                                     # isSteady
-            steady = kin.mode == "idle" and not np.any(np.abs(kin.velocity) > 1e-6)
-            self._out_int(1, 1 if steady else 0)
-        elif cmd == 255:                                    # stopScript
-            self.keep_running = False
-        else:                                               # accepted, not emulated
-            _log(c.cfg, f"control script: command {cmd} not emulated (acknowledged)")
-
-
-# ============================================================================ sessions
-class _RtdeSession:
-    """One RTDE client connection: its recipes and whether it is streaming."""
-
-    def __init__(self, sock, peer):
-        self.sock, self.peer = sock, peer
-        self.out_names: list[str] = []
-        self.out_types: list[str] = []
-        self.out_period = 0.0
-        self.next_send = 0.0
-        self.inputs: dict[int, tuple[list[str], list[str]]] = {}
-        self.next_recipe = 1
-        self.started = False
-        self.send_lock = threading.Lock()
-        self.closed = False
-
-    def send(self, data: bytes) -> bool:
-        with self.send_lock:
-            if self.closed:
-                return False
-            try:
-                self.sock.sendall(data)
-                return True
-            except OSError:
-                self.closed = True
-                return False
-
-
-def _recv_exact(sock, n, alive) -> bytes | None:
-    buf = b""
-    while len(buf) < n:
-        if not alive():
-            return None
-        try:
-            chunk = sock.recv(n - len(buf))
-        except socket.timeout:
-            continue
-        except OSError:
-            return None
-        if not chunk:
-            return None
-        buf += chunk
-    return buf
-
-
-def _listener(host, port) -> socket.socket:
-    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    try:
-        s.bind((host, port))
-    except OSError as exc:
-        s.close()
-        raise OSError(exc.errno, f"cannot bind {host}:{port} ({exc.strerror}); is another emulator "
-                                 f"or robot software using this address? Use another 127.0.0.x") from exc
-    s.listen(8)
-    s.settimeout(0.2)
-    return s
-
-
 # ============================================================================ controller
-class URControllerEmulator:
+class URControllerEmulator(RtdeServer, DashboardServer):
     """A UR controller on loopback: RTDE, dashboard and script servers around a simple arm.
 
     Use as a context manager or call :meth:`start` / :meth:`stop`. Thread-safe.
@@ -322,14 +106,14 @@ class URControllerEmulator:
         self.lock = threading.RLock()
         self.in_int, self.in_double = [0] * 48, [0.0] * 48
         self.out_int, self.out_double = [0] * 48, [0.0] * 48
-        self.script: _ControlScript | None = None
+        self.script: ControlScript | None = None
         self._last_program: str | None = None
         self.protective_stopped = False
         self.protective_stop_time = None
         self.protective_stop_reason = ""
         self.ticks = 0
-        self._owners: dict[str, _RtdeSession] = {}
-        self._sessions: list[_RtdeSession] = []
+        self._owners: dict[str, RtdeSession] = {}
+        self._sessions: list[RtdeSession] = []
         self._sockets: set[socket.socket] = set()
         self._listeners: list[socket.socket] = []
         self._threads: list[threading.Thread] = []
@@ -343,7 +127,7 @@ class URControllerEmulator:
                    (c.script_port, self._serve_script)]
         try:
             for port, _ in servers:
-                self._listeners.append(_listener(c.host, port))
+                self._listeners.append(listener(c.host, port))
         except OSError:
             for s in self._listeners:
                 s.close()
@@ -446,7 +230,7 @@ class URControllerEmulator:
             self.kin.halt()
             self.kin.force = None
             self.script = None
-            _log(self.cfg, f"PROTECTIVE STOP: {reason}")
+            log_line(self.cfg, f"PROTECTIVE STOP: {reason}")
 
     def unlock_protective_stop(self) -> str:
         """The dashboard's answer to ``unlock protective stop``."""
@@ -536,193 +320,6 @@ class URControllerEmulator:
                 self.trigger_protective_stop(f"contact force {f:.1f} N above {c.force_limit_n} N")
 
     # -- RTDE ------------------------------------------------------------------------
-    def _serve_rtde(self, conn, peer):
-        s = _RtdeSession(conn, peer)
-        with self.lock:
-            self._sessions.append(s)
-        try:
-            while self._running and not s.closed:
-                head = _recv_exact(conn, 3, self._alive)
-                if head is None:
-                    return
-                size, kind = wire.HEADER.unpack(head)
-                body = _recv_exact(conn, size - 3, self._alive) if size > 3 else b""
-                if body is None:
-                    return
-                reply = self._rtde_request(s, kind, body)
-                if reply is not None and not s.send(reply):
-                    return
-        finally:
-            with self.lock:
-                s.closed = True
-                self._sessions.remove(s)
-                for name in [n for n, owner in self._owners.items() if owner is s]:
-                    del self._owners[name]
-
-    def _rtde_request(self, s: _RtdeSession, kind: int, body: bytes) -> bytes | None:
-        c = self.cfg
-        if kind == wire.REQUEST_PROTOCOL_VERSION:
-            version = struct.unpack(">H", body[:2])[0] if len(body) >= 2 else 0
-            return wire.message(kind, bytes([1 if version in (1, 2) else 0]))
-        if kind == wire.GET_URCONTROL_VERSION:
-            return wire.message(kind, struct.pack(">IIII", *c.controller_version))
-        if kind == wire.SETUP_OUTPUTS:
-            freq = struct.unpack(">d", body[:8])[0]
-            names = wire.names(body[8:])
-            types = [wire.output_type(n) for n in names]
-            if 0 < freq <= c.frequency_hz and "NOT_FOUND" not in types:
-                with self.lock:
-                    s.out_names, s.out_types, s.out_period = names, types, 1.0 / freq
-            return wire.message(kind, bytes([1]) + ",".join(types).encode())
-        if kind == wire.SETUP_INPUTS:
-            names = wire.names(body)
-            with self.lock:
-                types = [wire.input_type(n) for n in names]
-                types = ["IN_USE" if not self._owned_by(n, s) else t for n, t in zip(names, types)]
-                if any(t in ("NOT_FOUND", "IN_USE") for t in types):
-                    return wire.message(kind, bytes([0]) + ",".join(types).encode())
-                rid = s.next_recipe
-                s.next_recipe += 1
-                s.inputs[rid] = (names, types)
-                for n in names:
-                    self._owners[n] = s
-            return wire.message(kind, bytes([rid]) + ",".join(types).encode())
-        if kind == wire.START:
-            ok = bool(s.out_names)
-            with self.lock:
-                s.started = ok
-                s.next_send = time.monotonic()
-            return wire.message(kind, bytes([1 if ok else 0]))
-        if kind == wire.PAUSE:
-            s.started = False
-            return wire.message(kind, bytes([1]))
-        if kind == wire.DATA_PACKAGE:
-            self._write_inputs(s, body)
-            return None
-        _log(c, f"RTDE: unknown message type {kind} from {s.peer}")
-        return None
-
-    def _owned_by(self, name: str, s: _RtdeSession) -> bool:
-        """True if ``name`` is free or already ``s``'s; frees it if its owner hung up."""
-        owner = self._owners.get(name, s)
-        if owner is s:
-            return True
-        try:                                    # a client that reconnects at once may race our recv
-            gone = owner.sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
-        except BlockingIOError:
-            gone = False
-        except OSError:
-            gone = True
-        if gone:
-            owner.closed = True
-            del self._owners[name]
-        return gone
-
-    def _write_inputs(self, s: _RtdeSession, body: bytes) -> None:
-        recipe = s.inputs.get(body[0]) if body else None
-        if recipe is None:
-            return
-        names, types = recipe
-        try:
-            values = wire.unpack_values(types, body[1:])
-        except struct.error:
-            _log(self.cfg, f"RTDE: malformed data package for recipe {body[0]}")
-            return
-        with self.lock:
-            for n, v in zip(names, values):
-                if n.startswith("input_int_register_"):
-                    self.in_int[int(n.rsplit("_", 1)[1])] = v
-                elif n.startswith("input_double_register_"):
-                    self.in_double[int(n.rsplit("_", 1)[1])] = v
-
-    # -- dashboard -------------------------------------------------------------------
-    def _serve_dashboard(self, conn, peer):
-        self._send_line(conn, "Connected: Universal Robots Dashboard Server")
-        buf = b""
-        while self._running:
-            try:
-                chunk = conn.recv(4096)
-            except socket.timeout:
-                continue
-            except OSError:
-                return
-            if not chunk:
-                return
-            buf += chunk
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                cmd = line.decode("utf-8", "replace").strip()
-                answer = self._dashboard(cmd)
-                if not self._send_line(conn, answer) or cmd.lower() == "quit":
-                    return
-
-    @staticmethod
-    def _send_line(conn, text) -> bool:
-        try:
-            conn.sendall((text + "\n").encode())
-            return True
-        except OSError:
-            return False
-
-    def _polyscope_version(self) -> str:
-        v = self.cfg.controller_version
-        return f"URSoftware {v[0]}.{v[1]}.{v[2]}.{v[3]} (emulated)"
-
-    def _dashboard(self, cmd: str) -> str:
-        low = cmd.lower()
-        with self.lock:
-            prot, running = self.protective_stopped, self.program_running
-            name = "rtde_control" if running or self._last_program else "<unnamed>"
-            fixed = {
-                "polyscopeversion": self._polyscope_version(),
-                "robotmode": "Robotmode: RUNNING",
-                "safetymode": "Safetymode: " + ("PROTECTIVE_STOP" if prot else "NORMAL"),
-                "safetystatus": "Safetystatus: " + ("PROTECTIVE_STOP" if prot else "NORMAL"),
-                "programstate": ("PLAYING " if running else "STOPPED ") + name,
-                "running": f"Program running: {str(running).lower()}",
-                "close safety popup": "closing safety popup",
-                "close popup": "closing popup",
-                "power on": "Powering on", "power off": "Powering off",
-                "brake release": "Brake releasing",
-                "get robot model": self.cfg.model,
-                "get serial number": self.cfg.serial_number,
-                "is in remote control": "true",
-                "get loaded program": "No program loaded",
-                "isprogramsaved": "false <unnamed>",
-                "restart safety": "Restarting safety",
-                "quit": "Disconnected",
-                "shutdown": "Shutting down",
-            }
-        if low in fixed:
-            return fixed[low]
-        if low == "unlock protective stop":
-            return self.unlock_protective_stop()
-        if low == "stop":
-            with self.lock:
-                self.script = None
-                self.kin.stop(10.0)
-            return "Stopped"
-        if low == "pause":
-            return "Pausing program" if running else "Failed to execute: pause"
-        if low == "play":
-            return self._play()
-        if low.startswith("popup "):
-            return "showing popup"
-        if low.startswith("addtolog "):
-            return "Added log message"
-        if low.startswith("load "):
-            return f"File not found: {cmd[5:]}"
-        return f"could not understand: '{cmd}'"
-
-    def _play(self) -> str:
-        with self.lock:
-            if self._last_program is None or self.protective_stopped:
-                return "Failed to execute: play"
-            if self.script is None:
-                self._start_program(self._last_program)
-        return "Starting program"
-
-    # -- script port -----------------------------------------------------------------
     def _serve_script(self, conn, peer):
         buf = ""
         while self._running:
@@ -743,7 +340,7 @@ class URControllerEmulator:
             start = buf.find("def ")
             if start < 0:
                 if buf.endswith("\n") and buf.strip():
-                    _log(self.cfg, f"script port: statement not emulated: {buf.strip()[:60]!r}")
+                    log_line(self.cfg, f"script port: statement not emulated: {buf.strip()[:60]!r}")
                     return ""
                 return buf
             end = buf.find("\nend", start)
@@ -755,100 +352,50 @@ class URControllerEmulator:
             with self.lock:
                 self._last_program = program
                 if self.protective_stopped:
-                    _log(self.cfg, "script port: program refused during a protective stop")
+                    log_line(self.cfg, "script port: program refused during a protective stop")
                 else:
                     self._start_program(program)
 
     def _start_program(self, program: str) -> None:
         header = program.split("\n", 1)[0]
         if not header.startswith("def rtde_control"):
-            _log(self.cfg, f"script port: program {header!r} not emulated; stopping the current one")
+            log_line(self.cfg, f"script port: program {header!r} not emulated; stopping the current one")
             self.script = None
             return
         offset = 24 if "reg_offset_int = # int register offset\n24" in program else 0
-        self.script = _ControlScript(self, offset)
-        _log(self.cfg, f"control script started (register offset {offset})")
+        self.script = ControlScript(self, offset)
+        log_line(self.cfg, f"control script started (register offset {offset})")
 
 
 # ============================================================================ process
-class URControllerProcess:
-    """The emulator as a separate process (what tests and ``tactile-emulate`` should use).
-
-    ``start()`` launches ``python -m hardware.emulators.ur_controller`` with the given
-    options and waits (bounded) for its READY line; ``stop()`` terminates it by PID;
-    ``kill()`` sends SIGKILL (a controller that dies); ``protective_stop()`` sends SIGUSR1.
-    """
+class URControllerProcess(EmulatorProcess):
+    """The emulator as a separate process (what tests and ``tactile-emulate`` should use):
+    ``python -m hardware.emulators.ur_controller --host HOST`` with ``options`` as flags
+    (``initial_pose=(...)`` → ``--initial-pose x,y,z,...``). ``protective_stop()`` sends SIGUSR1."""
 
     def __init__(self, host: str = "127.0.0.1", ready_timeout_s: float = 10.0, **options):
-        self.host, self.options, self.ready_timeout_s = host, options, ready_timeout_s
-        self.proc: subprocess.Popen | None = None
-        self.ready_line = ""
-
-    def command(self) -> list[str]:
-        args = [sys.executable, "-m", "hardware.emulators.ur_controller", "--host", self.host]
-        for key, value in self.options.items():
-            if value is None or value is False:
-                continue
-            flag = "--" + key.replace("_", "-")
-            if value is True:
-                args.append(flag)
-            elif isinstance(value, (list, tuple)):
-                args += [flag, ",".join(str(v) for v in value)]
-            else:
-                args += [flag, str(value)]
-        return args
-
-    def start(self) -> "URControllerProcess":
-        self.proc = subprocess.Popen(self.command(), stdout=subprocess.PIPE, stderr=None, text=True,
-                                     cwd=os.path.dirname(os.path.dirname(os.path.dirname(__file__))))
-        deadline = time.monotonic() + self.ready_timeout_s
-        while time.monotonic() < deadline:
-            ready, _, _ = select.select([self.proc.stdout], [], [], 0.1)
-            if ready:
-                line = self.proc.stdout.readline()
-                if line.startswith("READY"):
-                    self.ready_line = line.strip()
-                    return self
-                if not line:                                # EOF: the process is exiting
-                    try:
-                        self.proc.wait(timeout=2)
-                    except subprocess.TimeoutExpired:
-                        pass
-                    break
-        self.stop()
-        raise RuntimeError(f"UR controller emulator on {self.host} did not print READY within "
-                           f"{self.ready_timeout_s} s (exit code {self.proc.returncode})")
-
-    @property
-    def pid(self) -> int | None:
-        return self.proc.pid if self.proc else None
+        self.host, self.options = host, options
+        super().__init__("hardware.emulators.ur_controller", ["--host", host, *_flags(options)], ready_timeout_s)
 
     def protective_stop(self) -> None:
         os.kill(self.proc.pid, signal.SIGUSR1)
 
-    def kill(self) -> None:
-        if self.proc and self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(timeout=5)
 
-    def stop(self) -> None:
-        if self.proc is None:
-            return
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(timeout=5)
-        if self.proc.stdout:
-            self.proc.stdout.close()
-
-    def __enter__(self):
-        return self.start()
-
-    def __exit__(self, *exc):
-        self.stop()
+def _flags(options: dict) -> list[str]:
+    """Keyword options as command-line flags (``None``/``False`` omitted, ``True`` a bare flag,
+    sequences comma-separated)."""
+    args = []
+    for key, value in options.items():
+        if value is None or value is False:
+            continue
+        flag = "--" + key.replace("_", "-")
+        if value is True:
+            args.append(flag)
+        elif isinstance(value, (list, tuple)):
+            args += [flag, ",".join(str(v) for v in value)]
+        else:
+            args += [flag, str(value)]
+    return args
 
 
 def _floats(text: str) -> tuple:

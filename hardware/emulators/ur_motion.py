@@ -17,35 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-EPS = 1e-9
+from ..transforms import matrix_to_rotvec, rotvec_to_matrix
 
-
-def rotvec_to_matrix(r) -> np.ndarray:
-    """(3,) axis-angle (rad) → (3, 3) rotation matrix (Rodrigues)."""
-    r = np.asarray(r, float)
-    theta = float(np.linalg.norm(r))
-    if theta < EPS:
-        return np.eye(3)
-    k = r / theta
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + math.sin(theta) * K + (1 - math.cos(theta)) * K @ K
-
-
-def matrix_to_rotvec(R) -> np.ndarray:
-    """(3, 3) rotation matrix → (3,) axis-angle (rad), angle in [0, π]."""
-    R = np.asarray(R, float)
-    cos = max(-1.0, min(1.0, (np.trace(R) - 1) / 2))
-    theta = math.acos(cos)
-    if theta < 1e-7:
-        return np.zeros(3)
-    if math.pi - theta < 1e-5:                       # near π: use the symmetric part
-        k = np.sqrt(np.maximum((np.diag(R) + 1) / 2, 0))
-        i = int(np.argmax(k))
-        k[(i + 1) % 3] = math.copysign(k[(i + 1) % 3], R[i, (i + 1) % 3] + R[(i + 1) % 3, i])
-        k[(i + 2) % 3] = math.copysign(k[(i + 2) % 3], R[i, (i + 2) % 3] + R[(i + 2) % 3, i])
-        return theta * k / np.linalg.norm(k)
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    return theta * w / (2 * math.sin(theta))
 
 
 def _step_toward(v, target, dv_max):

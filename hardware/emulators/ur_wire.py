@@ -110,3 +110,16 @@ def unpack_values(types, data: bytes) -> list:
 def names(payload: bytes) -> list[str]:
     """Comma-separated variable names (ur_rtde sends a trailing comma)."""
     return [n for n in payload.decode("ascii", "replace").split(",") if n]
+
+
+# ---------------------------------------------------------------- controller state values
+DASHBOARD_PORT, SCRIPT_PORT, RTDE_PORT = 29999, 30003, 30004
+
+# runtime_state, robot_mode, safety_mode values (UR RTDE guide)
+STOPPED, PLAYING = 1, 2
+ROBOT_MODE_RUNNING = 7
+SAFETY_NORMAL, SAFETY_PROTECTIVE_STOP = 1, 3
+# safety_status_bits
+BIT_NORMAL, BIT_PROTECTIVE, BIT_STOPPED_DUE_TO_SAFETY = 1 << 0, 1 << 2, 1 << 10
+# robot_status_bits
+BIT_POWER_ON, BIT_PROGRAM_RUNNING = 1 << 0, 1 << 1

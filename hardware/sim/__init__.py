@@ -11,65 +11,18 @@ See ``docs/simulator.md``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
+from ..lab_container import Lab
 from .clock import SimClock
 from .config import SimConfig, load_config
 from .devices import SimArm, SimBiotac, SimHand, SimPump, SimScale
 from .stage_device import SimStage
-from .surfaces import Surface, SurfaceConfig, load_surface
+from ..surfaces import Surface, SurfaceConfig, load_surface
 from .truth import GroundTruth
 from .world import SimWorld
 
 __all__ = ["Lab", "make_sim_lab", "SimConfig", "SurfaceConfig", "load_config", "load_surface",
            "SimWorld", "SimClock", "SimArm", "SimHand", "SimBiotac", "SimPump", "SimScale", "SimStage",
            "Surface", "GroundTruth"]
-
-
-@dataclass
-class Lab:
-    """Every device of a lab (``stage`` only where an object stage is configured) plus, for a
-    simulated one, its world and ground truth.
-
-    ``with lab:`` connects every device and closes them all on exit.
-    """
-
-    arm: SimArm
-    hand: SimHand
-    biotac: SimBiotac
-    pump: SimPump
-    scale: SimScale
-    clock: SimClock
-    world: SimWorld | None = None
-    truth: GroundTruth | None = None
-    surface: Surface | None = None
-    stage: SimStage | None = None            # the object stage, if the lab has one
-
-    @property
-    def devices(self):
-        out = {"arm": self.arm, "hand": self.hand, "biotac": self.biotac, "pump": self.pump, "scale": self.scale}
-        return out | ({"stage": self.stage} if self.stage is not None else {})
-
-    def connect(self) -> None:
-        for d in self.devices.values():
-            d.connect()
-
-    def close(self) -> None:
-        for d in self.devices.values():
-            try:
-                d.close()
-            except Exception:  # closing must never mask the error that got us here
-                pass
-
-    def identities(self) -> dict[str, dict]:
-        return {k: d.identity.to_dict() for k, d in self.devices.items()}
-
-    def __enter__(self):
-        self.connect()
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
 
 def make_sim_lab(cfg=None, surface=None, *, hardware_key: str = "hardware",

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..arm import Arm, ArmState, Workspace
 from ..biotac import BiotacFrame, TactileSensors
-from ..device import DeviceIdentity
+from ..device import DeviceIdentity, SampleBuffer
 from ..errors import (DeviceDisconnectedError, NotConnectedError, ProtectiveStopError, SafetyError)
 from ..hand import JOINT_NAMES, Hand, HandState, check_joint_names
 from ..pour import Pump, PumpState, Scale, ScaleReading
@@ -37,8 +37,7 @@ class _SimDevice:
         self.world, self.clock, self.cfg = world, clock, world.cfg
         self.rng = world.rngs[self.kind]
         self._connected = False
-        self.buffer: deque = deque(maxlen=max(1, int(world.cfg.buffer_s * rate_hz)))
-        self.overflows = 0
+        self.buffer = SampleBuffer(world.cfg.buffer_s * rate_hz)
         self._clock_offset = float(self.rng.uniform(100.0, 10000.0))
         self._clock_rate = 1.0 + float(self.rng.uniform(-1, 1)) * world.cfg.sensor.clock_drift_ppm * 1e-6
         self._last_host = -math.inf
@@ -87,18 +86,18 @@ class _SimDevice:
     def _producing(self) -> bool:
         return self._connected and self.kind not in self.world.lost
 
+    @property
+    def overflows(self) -> int:
+        """Samples lost to a full buffer (a consumer that did not drain for ``buffer_s``)."""
+        return self.buffer.overflows
+
     def _push(self, sample) -> None:
-        if len(self.buffer) == self.buffer.maxlen:
-            self.overflows += 1
-        self.buffer.append(sample)
+        self.buffer.put(sample)
         self._latest = sample
 
     def _drain(self) -> list:
         self._require_connected()
-        out, buf = [], self.buffer
-        while buf:
-            out.append(buf.popleft())
-        return out
+        return self.buffer.drain()
 
 
 # ====================================================================== arm

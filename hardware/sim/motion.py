@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .geometry import matrix_to_rotvec, rotvec_to_matrix
+from ..transforms import matrix_to_rotvec, rotvec_to_matrix
 
 
 @dataclass

@@ -19,7 +19,7 @@ def pad_height_pose(lab: Lab, x: float, y: float, depth_m: float, finger: str = 
     w = lab.world
     T = w.T_tcp_sensor[finger]
     rv = np.asarray(lab.world.cfg.arm.home_pose[3:], float)
-    from .geometry import rotvec_to_matrix
+    from ..transforms import rotvec_to_matrix
     R = rotvec_to_matrix(rv)
     pole_w = R @ (T[:3, :3] @ (w.tip.pole * 1e-3) + T[:3, 3])
     z = lab.surface.max_z - depth_m - pole_w[2]

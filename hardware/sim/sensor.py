@@ -27,7 +27,7 @@ N_PAC = 22   # 2.2 kHz / 100 Hz
 
 
 @lru_cache(maxsize=4)
-def load_calibration(name: str) -> dict:
+def load_sensor_calibration(name: str) -> dict:
     """The calibration JSON shipped in ``hardware/sim`` (or an absolute path)."""
     path = Path(name) if Path(name).is_absolute() else Path(__file__).with_name(name)
     if not path.exists():
@@ -56,7 +56,7 @@ class BiotacModel:
 
     def __init__(self, fingers, cfg: SensorModelConfig, rng: np.random.Generator,
                  frame_dt: float = 0.01):
-        cal = load_calibration(cfg.calibration)
+        cal = load_sensor_calibration(cfg.calibration)
         self.cfg, self.rng, self.dt = cfg, rng, frame_dt
         tpl = [cal["sensors"][TEMPLATE_OF_FINGER[f] % len(cal["sensors"])] for f in fingers]
         F = len(fingers)

@@ -23,9 +23,9 @@ from ..hand import JOINT_INDEX, JOINT_NAMES
 from . import grasp, motion, skin
 from .config import SimConfig
 from .contact import Fingertip, build_fingertip, point_forces, shear_loads
-from .geometry import pose_to_matrix, rotvec_to_matrix
+from ..transforms import pose_to_matrix, rotvec_to_matrix
 from .stage import StageMotion
-from .surfaces import Surface
+from ..surfaces import Surface
 from .truth import GroundTruth
 
 DEVICE_STREAMS = ("arm", "hand", "biotac", "pump", "scale", "world", "stage", "calibration")

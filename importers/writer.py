@@ -1,7 +1,7 @@
 """Write a file's :class:`~.recording.Recording` chunks as a run store (``run.zarr`` + ``run.json``), atomically.
 
 The store has the layout of a recorded run (``docs/run_store.md``), written through
-:class:`protocols.store.RunStore` with the recorder's column layout, so ``tactile-analyze``
+:class:`runstore.RunStore` with the recorder's column layout, so ``tactile-analyze``
 reads it like any run:
 
 - ``biotac``: ``time`` (s since the first frame, from the clock model of ``device_time``
@@ -15,7 +15,7 @@ reads it like any run:
 - root attributes: ``protocol="import"``, ``labels=[]``, ``status="success"``, ``import``
   (source, checksum, importer, finger decision), ``baseline``, ``calibration``, ``streams``.
 
-Streaming (:func:`write_store`): the file is read again chunk by chunk (the second pass; the
+Streaming (:func:`write_import_store`): the file is read again chunk by chunk (the second pass; the
 first, :func:`.importer.scan`, fitted the clock model and chose the fingers) and each chunk is
 appended as it comes, so memory is one chunk whatever the file's length. What needs every
 frame is computed without holding them: the frame rate (the exact median interval,
@@ -29,7 +29,6 @@ renamed into place by :func:`publish` once every store of the import is complete
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import tempfile
@@ -41,13 +40,14 @@ import zarr
 
 from hardware.biotac import COUNTS_MAX, PAC_RATE_HZ
 from hardware.device import batch_times
-from protocols import rundir
-from protocols.clockmodel import ClockFit, latency_stats, sequence_gaps
-from protocols.provenance import write_run_json
-from protocols.store import RunStore, jsonable
+from hardware.streams import as_dtype
+from runstore import RunStatus, RunStore, rundir
+from runstore.clockmodel import ClockFit, latency_stats, sequence_gaps
+from runstore.provenance import write_run_json
+from runstore.layout import event_columns
 
 from .baseline import Baseline
-from .recording import ImportInputError, Prepared, Recording, diffs, median_of, rate_of
+from .recording import ImportInputError, PreparedSource, Recording, diffs, median_of, rate_of
 
 PROTOCOL = "import"
 OPTIONAL = ("pdc", "tdc", "tac")
@@ -66,13 +66,10 @@ def time_base(clock: ClockFit | None, t0: float):
     return lambda x: clock(x) - t0
 
 
-_I16 = np.iinfo(np.int16)
-
-
 def _i16(a) -> np.ndarray:
     """Counts as int16, values beyond int16 clipped (as the recorder stores them; only frames
     flagged ``valid = False`` have any)."""
-    return np.clip(np.asarray(a), _I16.min, _I16.max).astype(np.int16)
+    return as_dtype(a, np.int16)
 
 
 def _in_range(a: np.ndarray, axes) -> np.ndarray:
@@ -104,7 +101,7 @@ def pac_block(rec: Recording, to_run, host_t0: float, rate_hz: float = PAC_RATE_
     """``biotac_pac`` columns of a chunk with PAC: (M, F) int16 ``pac`` and (M,) ``time_pac``,
     ``device_time``, ``host_time`` (s). A frame's n samples end at its timestamp, 1/rate apart
     (closer when the frame follows the one before sooner than that), strictly increasing, as
-    :func:`protocols.recorder.pac_columns`; ``previous``: the last PAC device time before the chunk."""
+    :func:`hardware.biotac.pac_columns`; ``previous``: the last PAC device time before the chunk."""
     counts = np.array([p.shape[1] for p in rec.pac], np.int64)                  # (N,)
     pac = np.concatenate([p.T for p in rec.pac]) if len(rec.pac) else np.zeros((0, len(rec.fingers)))
     device = batch_times(rec.device_time, counts, 1.0 / rate_hz, previous)
@@ -112,14 +109,6 @@ def pac_block(rec: Recording, to_run, host_t0: float, rate_hz: float = PAC_RATE_
             else np.full(len(device), np.nan))
     return {"time_pac": to_run(device) if len(device) else np.zeros(0), "device_time": device,
             "host_time": host - host_t0, "pac": _i16(pac)}
-
-
-def event_block(rows: list[tuple]) -> dict:
-    """``events`` columns of ``(time s, kind, name, detail dict)`` rows (detail as JSON text)."""
-    return {"time": np.array([r[0] for r in rows], float),
-            "kind": np.array([r[1] for r in rows], dtype=object),
-            "name": np.array([r[2] for r in rows], dtype=object),
-            "detail": np.array([json.dumps(jsonable(r[3])) for r in rows], dtype=object)}
 
 
 def gap_events(seq: np.ndarray, time: np.ndarray, last_seq: int | None, last_time: float | None) -> list[tuple]:
@@ -148,13 +137,13 @@ def stored_rate(store_path: Path, n: int, rows: int) -> float:
     return rate_of(median_of(intervals, n - 1))
 
 
-def write_store(prepared: Prepared, store_path: Path, provenance: dict, import_attrs: dict,
+def write_import_store(prepared: PreparedSource, store_path: Path, provenance: dict, import_attrs: dict,
                 baseline: Baseline | None = None) -> dict:
     """Create the run store ``store_path`` (must not exist) holding the file, streamed; status ``success``.
 
     Args:
         prepared: the file after the first pass (reader, scan, fingers kept).
-        provenance: :func:`protocols.provenance.collect` output (plus ``source``, ``importer``).
+        provenance: :func:`runstore.provenance.collect` output (plus ``source``, ``importer``).
         import_attrs: the root attribute ``import`` (source, checksum, finger decision...);
             its ``rate_hz`` is set here, from the stored times.
         baseline: an unloaded baseline from elsewhere, or ``None``.
@@ -193,16 +182,16 @@ def write_store(prepared: Prepared, store_path: Path, provenance: dict, import_a
                   "t0_clock": "host (bag record time)" if has_host else "device (file time)"}
         store.set_attrs(**{"import": import_attrs})
         store.set_group_attrs("biotac", stream=stream, source_channels=list(scan.channels))
-        store.close("success", streams={"biotac": stream})
+        store.close(RunStatus.SUCCESS, streams={"biotac": stream})
     finally:
         if not store.closed:
-            store.close("failed")
+            store.close(RunStatus.FAILED)
     absent = [c for c in OPTIONAL if c not in scan.channels]
     _finish_biotac_group(store_path, absent, baseline.counts(fingers) if baseline else None, baseline_attrs)
     return {**stream, "t0": scan.t0, "rate_hz": rate}
 
 
-def _append_chunks(store: RunStore, prepared: Prepared, to_run, host_t0: float, import_detail: dict) -> dict:
+def _append_chunks(store: RunStore, prepared: PreparedSource, to_run, host_t0: float, import_detail: dict) -> dict:
     """Append every chunk (the second pass) with its gap events after the ``import`` event;
     returns the counters (samples, gaps, missing, invalid) and the residual-latency sample
     (device s, host s) of every ``max(1, N // LATENCY_SAMPLE)``-th frame."""
@@ -210,7 +199,7 @@ def _append_chunks(store: RunStore, prepared: Prepared, to_run, host_t0: float, 
     samples = gaps = missing = invalid = 0
     last_seq = last_time = last_pac = None
     sample_d, sample_h = [], []
-    store.append("events", event_block([(0.0, "info", "import", import_detail)]))
+    store.append("events", event_columns([(0.0, "info", "import", import_detail)]))
     for chunk in prepared.chunks():
         bio = biotac_block(chunk, to_run, host_t0)
         blocks = {"biotac": bio}
@@ -220,7 +209,7 @@ def _append_chunks(store: RunStore, prepared: Prepared, to_run, host_t0: float, 
                 last_pac = float(blocks["biotac_pac"]["device_time"][-1])
         events = gap_events(bio["seq"], bio["time"], last_seq, last_time)
         if events:
-            blocks["events"] = event_block(events)
+            blocks["events"] = event_columns(events)
         store.append_many(blocks)
         gaps += sum(e[3]["missing"] > 0 for e in events)
         missing += sum(e[3]["missing"] for e in events if e[3]["missing"] > 0)
@@ -270,7 +259,7 @@ STAGING_MARK = ".importing-"
 
 def staging_dir(target: Path) -> Path:
     """A fresh hidden directory beside ``target`` (same filesystem, so the rename is atomic),
-    locked by this process (:mod:`protocols.rundir`) until :func:`release_staging`, so that
+    locked by this process (:mod:`runstore.rundir`) until :func:`release_staging`, so that
     :func:`remove_stale_staging` can tell a live import's staging from a killed one's."""
     target.parent.mkdir(parents=True, exist_ok=True)
     path = Path(tempfile.mkdtemp(prefix=f".{target.name}{STAGING_MARK}", dir=target.parent))
@@ -295,12 +284,12 @@ def remove_stale_staging(folders) -> list[Path]:
     return stale
 
 
-def write_run(prepared: Prepared, staging: Path, provenance: dict, import_attrs: dict,
+def write_run(prepared: PreparedSource, staging: Path, provenance: dict, import_attrs: dict,
               baseline: Baseline | None = None) -> dict:
-    """``staging/run.zarr`` (:func:`write_store`) and ``staging/run.json`` (provenance + status
-    ``success``). Returns :func:`write_store`'s summary."""
-    summary = write_store(prepared, staging / "run.zarr", provenance, import_attrs, baseline)
-    write_run_json(staging / "run.json", provenance, "success",
+    """``staging/run.zarr`` (:func:`write_import_store`) and ``staging/run.json`` (provenance + status
+    ``success``). Returns :func:`write_import_store`'s summary."""
+    summary = write_import_store(prepared, staging / "run.zarr", provenance, import_attrs, baseline)
+    write_run_json(staging / "run.json", provenance, RunStatus.SUCCESS,
                    extra={"import": import_attrs, "baseline": (baseline.to_attrs(prepared.fingers) if baseline
                                                                else {"method": "none"})})
     return summary

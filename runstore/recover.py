@@ -34,9 +34,9 @@ from hardware.errors import brief
 
 from . import rundir
 from .provenance import write_run_json
-from .store import remove_debris, utc_now
-
-TIME_COORDS = ("time", "time_pac", "time_arm", "time_hand", "time_pump", "time_scale")
+from .jsonvalues import utc_now
+from .status import RunStatus
+from .writer import remove_debris
 
 
 def recover(path) -> dict:
@@ -65,7 +65,7 @@ def _recover(path: Path) -> dict:
         if status is None or run_id is None:
             raise ValueError(f"{path}: not a run store (no run_id/status attributes)")
         debris = [p.name for p in remove_debris(path.parent)]
-        if status != "running":
+        if status != RunStatus.RUNNING:
             written = _run_json_of_closed(path, committed.attrs)
             return {"path": str(path), "status": status, "action": "none: the run was closed",
                     **({"run_json": "written"} if written else {}), **({"removed": debris} if debris else {})}
@@ -76,22 +76,29 @@ def _recover(path: Path) -> dict:
             if live.shape != arr.shape:
                 trimmed[name] = int(live.shape[0] - arr.shape[0])
                 live.resize(arr.shape)
-            if name.rsplit("/", 1)[-1] in TIME_COORDS and arr.shape[0]:
+            if _is_time_coord(name, arr) and arr.shape[0]:
                 try:
                     end = max(end, float(np.asarray(arr[-1])))
                 except Exception as exc:        # noqa: BLE001 - a chunk that does not decode
                     raise ValueError(f"{path}/{name}: its last chunk cannot be read ({type(exc).__name__}: "
                                      f"{brief(str(exc), 120)}); the store is damaged") from None
         unpublished = _drop_unpublished(path, set(names) | set(_groups(committed)))
-        attrs = {"status": "crashed", "end_time": utc_now(), "recovered": True, "last_sample_s": end}
+        attrs = {"status": RunStatus.CRASHED, "end_time": utc_now(), "recovered": True, "last_sample_s": end}
         zarr.open_group(str(path), mode="r+", use_consolidated=True).update_attributes(attrs)
         zarr.consolidate_metadata(str(path))
     provenance = dict(committed.attrs.get("provenance") or {})
     provenance.setdefault("run_id", run_id)
-    write_run_json(path.parent / "run.json", provenance, status="crashed", end_time=attrs["end_time"],
+    write_run_json(path.parent / "run.json", provenance, status=RunStatus.CRASHED, end_time=attrs["end_time"],
                    extra={"store": path.name, "recovered": True, "last_sample_s": end})
-    return {"path": str(path), "status": "crashed", "last_sample_s": end, "trimmed": trimmed,
+    return {"path": str(path), "status": RunStatus.CRASHED, "last_sample_s": end, "trimmed": trimmed,
             "dropped_unpublished": unpublished, "action": "recovered", **({"removed": debris} if debris else {})}
+
+
+def _is_time_coord(name: str, arr) -> bool:
+    """Whether ``arr`` is a stream's time coordinate: its own (only) dimension, in seconds —
+    known from the store itself, so streams added later are covered (:data:`~runstore.layout.TIME_COORDS`)."""
+    leaf = name.rsplit("/", 1)[-1]
+    return tuple(arr.metadata.dimension_names or ()) == (leaf,) and arr.attrs.get("units") == "s"
 
 
 def _drop_unpublished(path: Path, published: set[str]) -> list[str]:

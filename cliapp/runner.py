@@ -1,6 +1,6 @@
 """Running this project's Hydra apps (``tactile-run``, ``tactile-analyze``, ``tactile-import``).
 
-:func:`run_app` puts the config guard (:mod:`protocols.config_guard`) in front of Hydra and
+:func:`run_app` puts the config guard (:mod:`cliapp.config_guard`) in front of Hydra and
 turns what Hydra or the guard refuses into one line and exit status 2, and a stray Ctrl-C or
 SIGTERM into one line and exit status 3.
 """
@@ -12,9 +12,11 @@ import signal
 import sys
 import traceback
 
+from runstore.status import ExitCode
+
 from .config_guard import install
 
-BAD_INPUT, INTERRUPTED = 2, 3
+BAD_INPUT, INTERRUPTED = ExitCode.BAD_INPUT, ExitCode.INTERRUPTED
 
 
 def run_app(app, argv=None) -> None:
@@ -41,6 +43,13 @@ def run_app(app, argv=None) -> None:
     finally:
         for s in (signal.SIGINT, signal.SIGTERM):   # the app is done: a late signal must not turn
             signal.signal(s, signal.SIG_IGN)        # its exit status into a kill (at interpreter exit)
+
+
+def report(exc: BaseException, what: str, verbose: bool = False) -> None:
+    """An error on stderr as one line, ``what: message`` (the traceback before it with ``verbose``)."""
+    if verbose:
+        traceback.print_exception(exc)
+    print(f"{what}: {exc}", file=sys.stderr)
 
 
 def error_line(exc: BaseException) -> str:

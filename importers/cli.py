@@ -9,26 +9,26 @@ line and column; nothing written; for a directory: the good files are imported a
 bad one gets its line), 1 other failure. A truncated bag imports what it holds
 (exit 0) and its output line ends with ``WARNING: truncated bag: ...``. Files are streamed:
 memory does not grow with their length (``docs/import.md``). ``verbose=true`` adds the
-traceback. The work is :func:`protocols.importers.import_source`.
+traceback. The work is :func:`importers.import_source`.
 """
 
 from __future__ import annotations
 
 import sys
-import traceback
 from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import OmegaConf
 
-from protocols.app import run_app
+from cliapp.runner import report, run_app
+from runstore.status import ExitCode
 
 from .importer import ImportIncomplete, ImportSettings, import_source
 from .recording import ImportInputError
 
-CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
-BAD_INPUT, FAILED = 2, 1
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+BAD_INPUT, FAILED = ExitCode.BAD_INPUT, ExitCode.FAILED
 _exit = {"code": 0}
 
 
@@ -57,18 +57,12 @@ def run(cfg, overrides=(), console=print) -> int:
               file=sys.stderr)
         return BAD_INPUT
     except (ImportInputError, FileExistsError, ValueError) as exc:
-        _report(cfg, exc, "import error")
+        report(exc, "import error", bool(cfg.get("verbose")))
         return BAD_INPUT
     except Exception as exc:  # noqa: BLE001 - one line, then the exit code says it failed
-        _report(cfg, exc, f"import failed ({type(exc).__name__})")
+        report(exc, f"import failed ({type(exc).__name__})", bool(cfg.get("verbose")))
         return FAILED
     return 0
-
-
-def _report(cfg, exc: Exception, what: str) -> None:
-    if cfg.get("verbose"):
-        traceback.print_exception(exc)
-    print(f"{what}: {exc}", file=sys.stderr)
 
 
 @hydra.main(config_path=str(CONF_DIR), config_name="import", version_base=None)

@@ -3,7 +3,7 @@
 Every file is read twice, chunk by chunk, so memory does not grow with its length: a first
 pass (:func:`scan`) checks every frame and collects what the import must decide before
 writing (connected fingers, the early window of a baseline estimate, the clock model); the
-second pass (:func:`.writer.write_store`) writes the frames as they come.
+second pass (:func:`.writer.write_import_store`) writes the frames as they come.
 
 Order of work, so that bad input never leaves anything behind: check the options, discover
 the files (a directory's subfolders included), check no target exists, remove what a
@@ -22,13 +22,13 @@ import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from protocols.clockmodel import OnlineClockModel
-from protocols.provenance import collect
+from runstore.clockmodel import OnlineClockModel
+from runstore.provenance import collect
 
 from .bag import TOPIC, BagFile
 from .baseline import Baseline, EarlyWindow, estimate_baseline, load_calibration
 from .csv import GAP_FACTOR, CsvFile
-from .recording import (CHUNK_FRAMES, Connectivity, ImportInputError, Prepared, Reader, Recording, Scan,
+from .recording import (CHUNK_FRAMES, Connectivity, ImportInputError, PreparedSource, Reader, Recording, Scan,
                         decide_fingers, keep_fingers, parse_rate)
 from .sources import Source, checksum, discover, sha256_file
 from .writer import discard, publish, release_staging, remove_stale_staging, staging_dir, write_run
@@ -94,7 +94,7 @@ def scan(reader: Reader, early_s: float = 1.0, frames: int = CHUNK_FRAMES) -> Sc
     """The first pass over a file: read (and so check) every frame, chunk by chunk, keeping
     only the frame count, the unconnected-finger test (:class:`.recording.Connectivity`),
     the early window (:class:`.baseline.EarlyWindow`, ``early_s`` s) and the clock model of
-    device against host time (:class:`protocols.clockmodel.OnlineClockModel`, one point per
+    device against host time (:class:`runstore.clockmodel.OnlineClockModel`, one point per
     1 s window). Memory: one chunk of ``frames`` frames (plus the early window, at most as
     much), and one clock-model point (~0.2 kB) per second recorded."""
     conn, early, clock = None, EarlyWindow(early_s, frames), OnlineClockModel(window_s=1.0)
@@ -122,7 +122,7 @@ def check_settings(settings: ImportSettings) -> None:
     parse_rate(settings.rate_hz)
 
 
-def prepare(src: Source, settings: ImportSettings) -> Prepared:
+def prepare(src: Source, settings: ImportSettings) -> PreparedSource:
     """Open and scan one source (the first pass) and decide its fingers (see
     :func:`.recording.decide_fingers`)."""
     reader = open_source(src, settings)
@@ -130,7 +130,7 @@ def prepare(src: Source, settings: ImportSettings) -> Prepared:
     where = str(reader.meta.get("path", src.path))
     decision = decide_fingers(found.fingers, found.unconnected, settings.fingers, where)
     kept = tuple(f for f in found.fingers if f in decision["kept"])
-    return Prepared(reader, found, kept, decision, settings.chunk_frames)
+    return PreparedSource(reader, found, kept, decision, settings.chunk_frames)
 
 
 def choose_baseline(settings: ImportSettings, recs: list[Recording], names: list[str]) -> Baseline | None:
@@ -273,13 +273,13 @@ def reader_warnings(meta: dict) -> list[str]:
     return out
 
 
-def run_metadata(src: Source, prepared: Prepared, baseline: Baseline | None, config_yaml: str,
+def run_metadata(src: Source, prepared: PreparedSource, baseline: Baseline | None, config_yaml: str,
                  overrides, n_sources: int) -> tuple[dict, dict]:
     """The root attribute ``import`` and the provenance of one imported file.
 
     ``import``: source path, ``sha256``, bytes and files, ``importer``, what the reader found,
     the finger decision, frames, rate (Hz; ``None`` here, set by the writer from the stored
-    times), channels. Provenance: :func:`protocols.provenance.collect` plus ``source`` (path,
+    times), channels. Provenance: :func:`runstore.provenance.collect` plus ``source`` (path,
     sha256, bytes, files, format) and ``importer``.
     """
     summ = checksum(src)
@@ -307,7 +307,7 @@ def _importer(src: Source) -> dict:
             return importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
             return "unknown"
-    fn = "protocols.importers.bag.read_bag" if src.kind == "bag" else "protocols.importers.csv.read_csv"
+    fn = "importers.bag.read_bag" if src.kind == "bag" else "importers.csv.read_csv"
     out = {"name": "tactile-import", "reader": fn, "tactile-flow": version("tactile-flow")}
     if src.kind == "bag":
         out["rosbags"] = version("rosbags")

@@ -21,7 +21,7 @@ import numpy as np
 
 from hardware.biotac import FINGERS, N_TAXELS
 from hardware.errors import RATE_RANGE_HZ, brief
-from protocols.clockmodel import ClockFit
+from runstore.clockmodel import ClockFit
 
 #: relative disagreement allowed between ``rate_hz`` and the rate of a file's own timestamps
 RATE_TOLERANCE = 0.02
@@ -125,7 +125,7 @@ class Scan:
 
 
 @dataclass
-class Prepared:
+class PreparedSource:
     """One file ready for the second pass: its reader, what the first pass found, the
     fingers to store (Shadow order), the finger decision (:func:`decide_fingers`) and the
     frames per chunk."""

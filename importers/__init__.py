@@ -1,6 +1,6 @@
 """Importers: bring recordings from elsewhere (ROS bags, CSV files) into the project's run store.
 
-    from protocols.importers import ImportSettings, import_source
+    from importers import ImportSettings, import_source
     results = import_source("lab/session.bag", "imported", ImportSettings(baseline="estimate"))
     results[0].store       # imported/session/run.zarr, ready for tactile-analyze
 
@@ -8,7 +8,7 @@ Files are streamed: read twice in chunks of :data:`.recording.CHUNK_FRAMES` fram
 checking pass, a writing pass), so memory does not grow with their length.
 
 Modules: :mod:`.recording` (the format-neutral :class:`Recording` chunk, unconnected-finger
-detection, exact medians of long data), :mod:`.bag` and :mod:`.csv` (chunk readers
+detection, exact medians of long data), :mod:`.bag` (on :mod:`.ros1`, a ROS1 record reader) and :mod:`.csv` (chunk readers
 :class:`BagFile`, :class:`CsvFile`; truncated bags, garbage rows), :mod:`.baseline`
 (calibration files and import-wide estimates), :mod:`.sources` (what a path holds,
 checksums), :mod:`.writer` (run store + run.json, streamed; staging and atomic rename),

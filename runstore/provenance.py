@@ -1,7 +1,7 @@
 """Provenance of a run: what ran, from which code, on which machine and hardware.
 
 :func:`collect` gathers it once at the start (JSON-serialisable values only); the engine
-passes it to :meth:`protocols.store.RunStore.create` (root attribute ``provenance``) and
+passes it to :meth:`runstore.writer.RunStore.create` (root attribute ``provenance``) and
 :func:`write_run_json` writes it, with the exit status and end time, to ``run.json`` beside
 the store — atomically, so a reader never sees a half-written file.
 """
@@ -20,7 +20,8 @@ import tempfile
 import uuid
 from pathlib import Path
 
-from .store import SCHEMA_VERSION, jsonable, utc_now
+from .jsonvalues import jsonable, utc_now
+from .layout import SCHEMA_VERSION
 
 UNKNOWN = "unknown"
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
@@ -30,17 +31,18 @@ def _git(root: Path, *args: str) -> bytes:
     return subprocess.run(["git", "-C", str(root), *args], capture_output=True, check=True, timeout=20).stdout
 
 
-def git_state(root: Path = PROJECT_ROOT) -> dict:
+def git_state(root: Path = PROJECT_ROOT, paths: tuple[str, ...] = ()) -> dict:
     """Commit, dirty flag (tracked files changed), SHA-256 of ``git diff HEAD`` and the number
-    of untracked files of the git checkout at ``root``; every value ``"unknown"`` if ``root``
-    is not the top of a git work tree (e.g. an installed wheel) or git is missing."""
+    of untracked files of the git checkout at ``root`` (the diff and the untracked files under
+    ``paths`` only, if given); every value ``"unknown"`` if ``root`` is not the top of a git work
+    tree (e.g. an installed wheel) or git is missing."""
     try:
         top = Path(_git(root, "rev-parse", "--show-toplevel").decode().strip()).resolve()
         if top != root.resolve():
             raise ValueError(f"{root} is inside {top}, not a checkout of this project")
         commit = _git(root, "rev-parse", "HEAD").decode().strip()
-        diff = _git(root, "diff", "HEAD", "--binary")
-        untracked = _git(root, "ls-files", "--others", "--exclude-standard").decode().splitlines()
+        diff = _git(root, "diff", "HEAD", "--binary", "--", *paths)
+        untracked = _git(root, "ls-files", "--others", "--exclude-standard", "--", *paths).decode().splitlines()
     except (OSError, subprocess.SubprocessError, ValueError):
         return {"commit": UNKNOWN, "dirty": UNKNOWN, "diff_sha256": UNKNOWN, "untracked_files": UNKNOWN}
     return {"commit": commit, "dirty": bool(diff), "diff_sha256": hashlib.sha256(diff).hexdigest(),

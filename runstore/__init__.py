@@ -1,0 +1,27 @@
+"""The run store: one zarr v3 ``run.zarr`` per run, written by the recorder and the importers
+and read by the analysis, so writer and reader share one layout and cannot drift apart.
+
+=====================  ===========================================================
+module                 holds
+=====================  ===========================================================
+:mod:`.layout`         the layout (blocks, variables, dims, dtypes, units), the schema
+                       version, the time-coordinate names
+:mod:`.writer`         :class:`RunStore`: create, append, commit (the commit protocol)
+:mod:`.reader`         :func:`open_run` and the schema-version check
+:mod:`.recover`        ``tactile-recover``: close a store its writer never closed
+:mod:`.clockmodel`     device clock → host clock (lower-envelope fit)
+:mod:`.provenance`     what ran, from which code, on which machine; ``run.json``
+:mod:`.status`         :class:`RunStatus` and the commands' :class:`ExitCode`
+:mod:`.jsonvalues`     JSON-clean attribute values, the UTC time stamp
+:mod:`.rundir`         one run directory, one writer (a lock)
+=====================  ===========================================================
+"""
+
+from .jsonvalues import jsonable, utc_now
+from .reader import StoreVersionError, check_version, open_run
+from .status import ExitCode, RunStatus
+from .layout import SCHEMA_VERSION, STATUSES, TIME_COORDS, Block, Var, run_schema
+from .writer import RunStore, remove_debris
+
+__all__ = ["RunStore", "open_run", "check_version", "StoreVersionError", "run_schema", "Block", "Var",
+           "SCHEMA_VERSION", "STATUSES", "RunStatus", "ExitCode", "TIME_COORDS", "jsonable", "utc_now", "remove_debris"]

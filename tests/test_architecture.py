@@ -1,0 +1,99 @@
+"""The dependency direction of docs/architecture.md, checked on the source: every import
+(module level or inside a function) of every module of each package goes down the layers,
+never up or sideways, and importing a package loads no package above it."""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: package -> the project packages it may import (docs/architecture.md, "Dependency direction")
+ALLOWED = {
+    "tactile": set(),
+    "hardware": {"tactile"},
+    "runstore": {"hardware", "tactile"},
+    "cliapp": {"runstore", "hardware", "tactile"},
+    "importers": {"cliapp", "runstore", "hardware", "tactile"},
+    "protocols": {"importers", "cliapp", "runstore", "hardware", "tactile"},
+    "analysis": {"cliapp", "runstore", "hardware", "tactile"},
+    "viewer": {"analysis", "cliapp", "runstore", "hardware", "tactile"},
+}
+#: modules that stand beside the simulator and must not import it, with the one import each
+#: may still make until the typed configuration layer (issue 14, item 3) leaves hardware/sim
+BESIDE_THE_SIMULATOR = {"hardware.lab": {"hardware.sim.config"}, "hardware.surfaces": {"hardware.sim.config"},
+                        "hardware.lab_container": set(), "hardware.transforms": set(),
+                        "protocols.plan": set(), "protocols.engine": set(), "protocols.recorder": set()}
+#: kept only so that old imports keep working (they re-export what moved)
+RE_EXPORTS = {"protocols.store"}
+
+
+def modules(package: str):
+    for path in sorted((ROOT / package).rglob("*.py")):
+        parts = path.relative_to(ROOT).with_suffix("").parts
+        yield ".".join(parts[:-1] if parts[-1] == "__init__" else parts), path
+
+
+def imports(module: str, path: Path) -> list[tuple[int, str]]:
+    """(line, absolute module) of every import in the file, relative ones resolved."""
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module
+            out.append((node.lineno, target))
+            out += [(node.lineno, f"{target}.{a.name}") for a in node.names]
+    return out
+
+
+@pytest.mark.parametrize("package", sorted(ALLOWED))
+def test_no_upward_or_sideways_import(package):
+    bad = []
+    for module, path in modules(package):
+        if module in RE_EXPORTS:
+            continue
+        for line, target in imports(module, path):
+            top = target.split(".")[0]
+            if top in ALLOWED and top != package and top not in ALLOWED[package]:
+                bad.append(f"{path.relative_to(ROOT)}:{line} imports {target}")
+    assert not bad, f"{package} may import only {sorted(ALLOWED[package])}:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("module", sorted(BESIDE_THE_SIMULATOR))
+def test_the_real_lab_and_the_planner_do_not_stand_on_the_simulator(module):
+    path = ROOT / (module.replace(".", "/") + ".py")
+    found = {t for _, t in imports(module, path) if t.startswith("hardware.sim.") or t == "hardware.sim"}
+    extra = {t for t in found if not any(t == ok or t.startswith(ok + ".") for ok in BESIDE_THE_SIMULATOR[module])}
+    assert not extra, f"{module} imports from the simulator: {sorted(extra)}"
+
+
+def test_drivers_do_not_import_the_emulators():
+    bad = [f"{module} imports {t}" for module, path in modules("hardware")
+           if not module.startswith("hardware.emulators")
+           for _, t in imports(module, path) if t.startswith("hardware.emulators")]
+    assert not bad, bad
+
+
+def test_importing_a_package_loads_nothing_above_it():
+    """Every module of the package imported in a fresh interpreter (``__main__`` scripts and
+    the re-exports aside): only the packages below it may be loaded."""
+    code = ("import importlib, json, sys\nfor m in json.loads(sys.argv[1]): importlib.import_module(m)\n"
+            "print(json.dumps(sorted({m.split('.')[0] for m in sys.modules} & set(json.loads(sys.argv[2])))))")
+    for package, allowed in ALLOWED.items():
+        names = [m for m, path in modules(package) if m not in RE_EXPORTS and not m.endswith("__main__")]
+        out = subprocess.run([sys.executable, "-c", code, json.dumps(names), json.dumps(sorted(ALLOWED))],
+                             cwd=ROOT, capture_output=True, text=True, check=True).stdout
+        loaded = set(json.loads(out)) - {package}
+        assert loaded <= allowed, f"import {package} loads {sorted(loaded - allowed)}"
