@@ -28,6 +28,7 @@ from .lab import check_hardware, make_lab
 from .live import (LiveConfig, LiveMonitor, live_fingers, live_settings, open_viewer, tactile_config, terminal_display,
                    viewer_names, warm_up)
 from .plan import Plan, format_timeline, make_plan
+from .schema import check_config
 from .recorder import Recorder
 from .steps import ProtocolError
 from .store import RunStore, utc_now
@@ -58,6 +59,7 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
     ``interrupts`` owns Ctrl-C and SIGTERM (installed here when not given).
     """
     run_dir = Path(run_dir)
+    check_config(cfg)
     plan = make_plan(cfg)
     live, model = live_setup(cfg, plan, build=not cfg.plan_only)
     if cfg.plan_only:
