@@ -13,7 +13,7 @@ import signal
 import sys
 import traceback
 
-from validation import unknown_key
+from validation import suggest, unknown_key
 
 from .config_guard import install
 
@@ -55,6 +55,15 @@ def error_line(exc: BaseException) -> str:
             and isinstance(getattr(cause, "key", None), str) and getattr(cause, "full_key", None):
         parent = cause.full_key[:-len(cause.key)].rstrip(".")
         return str(unknown_key(parent, cause.key, _known_keys(parent, cause.parent_node.keys())))
+    missing = re.search(r"Could not find '([\w/]+)/([^']+)'", str(exc))
+    if missing:                                   # a group option that does not exist
+        group, name = missing.groups()
+        listed = str(exc).split("Available options in", 1)[-1].split("Config search path", 1)[0]
+        options = [w.strip() for w in listed.splitlines()[1:] if w.strip()] if "Available" in str(exc) else []
+        near = suggest(name, options)
+        return (f"{group.replace('/', '.')}={name}: no such {group.split('/')[-1]}"
+                + (f"; expected one of {', '.join(options)}" if options else "")
+                + (f"; did you mean `{near}`?" if near else ""))
     parts = [str(exc)]
     if exc.__cause__ is not None and str(exc.__cause__) not in parts[0]:
         parts.append(str(exc.__cause__))

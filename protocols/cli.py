@@ -142,6 +142,10 @@ def _app(cfg) -> None:
 
 
 def main() -> None:
+    if sys.argv[1:] in (["--list"], ["list"]):                 # what there is to run, one line each
+        from .listing import listing
+        print(listing(CONF_DIR))
+        sys.exit(0)
     register()
     logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
     _interrupts.install()                    # the run owns Ctrl-C and SIGTERM (protocols.interrupts)

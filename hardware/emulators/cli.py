@@ -13,7 +13,6 @@ used by the emulators' context managers and by the tests.
 
 from __future__ import annotations
 
-import argparse
 import os
 import queue
 import signal
@@ -131,14 +130,20 @@ def _alive(emulator) -> bool:
     return proc is None or proc.poll() is None
 
 
+EPILOG = """exit status: 0 stopped by Ctrl-C or SIGTERM, 1 an emulator exited or could not start,
+2 bad option (one line)."""
+
+
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="tactile-emulate", description=__doc__.split("\n")[0])
+    from validation.cli import ArgumentParser
+    parser = ArgumentParser(prog="tactile-emulate", description=__doc__.replace("``", "").split("\n\nEvery")[0],
+                            epilog=EPILOG)
     parser.add_argument("--host", default="127.0.0.1", help="loopback address for the UR controller emulator")
-    parser.add_argument("--rosbridge-port", type=int, default=9090)
+    parser.add_argument("--rosbridge-port", type=int, default=9090, help="rosbridge websocket port (default 9090)")
     parser.add_argument("--link-dir", default=DEFAULT_LINK_DIR,
                         help="directory of stable symlinks to the ptys (biotac, pump, scale)")
     parser.add_argument("--no-ur", action="store_true", help="do not start the UR controller emulator")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the emulated sensors' noise (default 0)")
     args = parser.parse_args(argv)
 
     from .rosbridge_server import RosbridgeEmulator
