@@ -163,3 +163,40 @@ def test_nothing_is_written_to_the_working_directory(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "outputs" / "imported" / "biotac_rest_untouched" / "run.zarr").is_dir()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["multirun", "outputs"]
+
+
+# ----------------------------------------------------------------------------- item 6
+class _Terminal:
+    """A terminal's stream as tqdm sees it: text in, ``isatty`` true."""
+
+    def __init__(self):
+        self.text = ""
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        pass
+
+    def isatty(self):
+        return True
+
+
+def test_the_live_line_shows_under_the_progress_bars_on_a_terminal():
+    from types import SimpleNamespace
+
+    from protocols.run import ProgressConsole
+    term = _Terminal()
+    screen = ProgressConsole(term)
+    bar = screen.bar(SimpleNamespace(duration=4.0, index=3, step=SimpleNamespace(kind="hold")))
+    show = screen.live_line()
+    bar.update(1.0)
+    show("ff ↓ 0.016 | th · 0.002 | slip: -")
+    bar.update(1.0)
+    show("ff ↓ 0.031 | th ↓ 0.020 | slip: ff release at 2.10 s")
+    assert "step 03 hold" in term.text
+    # the live line on the line under the bar (down one line, draw, back up), not over it
+    assert "\n\rff ↓ 0.031 | th ↓ 0.020 | slip: ff release at 2.10 s\x1b[A" in term.text, repr(term.text)
+    bar.close()
+    screen.close()
+    assert ProgressConsole(SimpleNamespace(isatty=lambda: False)).live_line() is None   # a pipe: bars only
