@@ -148,14 +148,14 @@ def _section(cls, prefix: str, values: dict):
     try:
         return build(cls, values, f"analysis.{prefix}")
     except ConfigError as exc:
-        raise AnalysisConfigError(exc.key, str(exc)[len(exc.key) + 2:]) from None
+        raise AnalysisConfigError(exc.key, exc.message) from None
 
 
 def _refuse_unknown(key: str, values, known) -> None:
     unknown = sorted(set(values) - set(known))
     if unknown:
         exc = unknown_key(key, unknown[0], known)
-        raise AnalysisConfigError(exc.key, str(exc)[len(exc.key) + 2:])
+        raise AnalysisConfigError(exc.key, exc.message)
 
 
 def _positive(key: str, value: float) -> None:

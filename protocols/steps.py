@@ -523,8 +523,8 @@ def parse_step(item, key: str, depth: int = 0) -> Step:
                                  f"{sorted(STEP_KINDS)}, got {item!r}")
     (kind, params), = item.items()
     if kind not in STEP_KINDS:
-        hint = str(unknown_key(key, kind, STEP_KINDS, what="step kind")).split("unknown step kind; ", 1)[1]
-        raise ProtocolError(key, f"unknown step kind {kind!r}; {hint}")
+        expected = unknown_key(key, kind, STEP_KINDS, what="step kind").message.split("; ", 1)[1]
+        raise ProtocolError(key, f"unknown step kind {kind!r}; {expected}")
     cls = STEP_KINDS[kind]
     key = f"{key}.{kind}"
     params = {} if params is None else params
@@ -553,7 +553,7 @@ def parse_reactions(items, key: str) -> list[Step]:
 
 
 def _protocol_error(exc: ConfigError) -> ProtocolError:
-    return ProtocolError(exc.key, str(exc)[len(exc.key) + 2:])
+    return ProtocolError(exc.key, exc.message)
 
 
 _SCALARS = {"float": (int, float), "int": (int,), "str": (str,), "bool": (bool,)}

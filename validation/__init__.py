@@ -24,6 +24,8 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import operator
+import types
 import typing
 from typing import Any
 
@@ -31,10 +33,11 @@ __all__ = ["ConfigError", "brief", "build", "check_keys", "spec", "suggest", "un
 
 
 class ConfigError(ValueError):
-    """A bad configuration value. ``key`` is the dotted config key at fault."""
+    """A bad configuration value. ``key`` is the dotted config key at fault, ``message``
+    what was wrong and what was expected."""
 
     def __init__(self, key: str, message: str):
-        self.key = key
+        self.key, self.message = key, message
         super().__init__(f"{key}: {message}")
 
 
@@ -110,13 +113,11 @@ def check_bounds(value, meta: dict, key: str) -> None:
         raise ConfigError(key, f"got {brief(value)}; expected one of {', '.join(map(str, meta['choices']))}")
     if "length" in meta and len(value) != meta["length"]:
         raise ConfigError(key, f"got {len(value)} values; expected {meta['length']}")
-    units = f" {meta['units']}" if "units" in meta else ""
-    for name, ok, word in (("gt", lambda v, b: v > b, ">"), ("ge", lambda v, b: v >= b, ">="),
-                           ("lt", lambda v, b: v < b, "<"), ("le", lambda v, b: v <= b, "<=")):
-        if name in meta and not ok(value, meta[name]):
-            bounds = [f"{w} {meta[n]:g}" for n, w in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<="))
-                      if n in meta]
-            raise ConfigError(key, f"got {brief(value)}; expected a number {' and '.join(bounds)}{units}")
+    tests = {"gt": (operator.gt, ">"), "ge": (operator.ge, ">="), "lt": (operator.lt, "<"), "le": (operator.le, "<=")}
+    if any(name in meta and not test(value, meta[name]) for name, (test, _) in tests.items()):
+        bounds = " and ".join(f"{word} {meta[name]:g}" for name, (_, word) in tests.items() if name in meta)
+        units = f" {meta['units']}" if "units" in meta else ""
+        raise ConfigError(key, f"got {brief(value)}; expected a number {bounds}{units}")
 
 
 # ----------------------------------------------------------------------------- building
@@ -154,7 +155,7 @@ def coerce(tp, v, key: str):
     origin = typing.get_origin(tp)
     if dataclasses.is_dataclass(tp):
         return build(tp, v, key)
-    if origin in (typing.Union, getattr(__import__("types"), "UnionType")):   # X | None
+    if origin in (typing.Union, types.UnionType):                             # X | None
         args = [a for a in typing.get_args(tp) if a is not type(None)]
         if v is None:
             if len(args) < len(typing.get_args(tp)):
