@@ -6,8 +6,9 @@
 
 Exit status: 0 analysed, 2 bad input or config (nothing written), 1 analysis failed, 3
 interrupted (Ctrl-C or SIGTERM; nothing partial is left). Errors are one line; ``verbose=true``
-adds the traceback. Several runs (a directory, or ``-m``) also write ``analysis_summary.csv``
-/ ``.md`` (one row per run: the ``headline`` of its summary) in the current directory.
+adds the traceback. Several runs also write ``analysis_summary.csv`` / ``.md`` (one row per
+run: the ``headline`` of its summary): in the directory given as ``run=``, or with ``-m`` in
+the sweep directory (``multirun/<date>/<time>_analyze/``); nothing goes to the current directory.
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ def analyse_paths(run: str, analysis_cfg, verbose: bool = False, console=print) 
             return INTERRUPTED
         _state["rows"].append(row)
     if len(stores) > 1:
-        write_table(Path.cwd(), _state["rows"][-len(stores):])
+        write_table(Path(run), _state["rows"][-len(stores):])
     return code
 
 
@@ -98,7 +99,7 @@ class SummaryTable(Callback):
 
     def on_multirun_end(self, config, **kwargs) -> None:
         if len(_state["rows"]) > 1:
-            write_table(Path.cwd(), _state["rows"])
+            write_table(Path(config.hydra.sweep.dir), _state["rows"])
 
 
 @hydra.main(config_path=str(CONF_DIR), config_name="analyze", version_base=None)

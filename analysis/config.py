@@ -14,54 +14,61 @@ from typing import Any
 
 from tactile import flow as tflow
 from tactile.pipeline import TactileConfig
+from validation import ConfigError, build, spec, unknown_key
 
 
-class AnalysisConfigError(ValueError):
-    """A bad analysis parameter; the message names the key."""
+class AnalysisConfigError(ConfigError):
+    """A bad analysis parameter: ``AnalysisConfigError("analysis.x: message")`` or
+    ``AnalysisConfigError("analysis.x", "message")``; ``key`` names the key."""
+
+    def __init__(self, key: str, message: str | None = None):
+        if message is None:
+            key, _, message = key.partition(": ")
+        super().__init__(key, message)
 
 
 @dataclass(frozen=True)
 class Segmentation:
-    smooth_s: float = 0.05
-    contact_threshold_sigma: float = 6.0
+    smooth_s: float = spec(0.05, gt=0)
+    contact_threshold_sigma: float = spec(6.0, gt=0)
     contact_min_pdc: float = 3.0
     contact_min_proxy: float = 1.5
     prominence_pdc: float = 20.0
     prominence_proxy: float = 2.0
-    min_contact_s: float = 0.1
+    min_contact_s: float = spec(0.1, gt=0)
     merge_gap_s: float = 0.05
-    prominence: float = 0.25
-    distance_s: float = 0.5
-    plateau_level: float = 0.55
+    prominence: float = spec(0.25, gt=0, lt=1)
+    distance_s: float = spec(0.5, gt=0)
+    plateau_level: float = spec(0.55, gt=0, lt=1)
     margin_s: float = 0.2
-    settle_frames: int = 10
-    load_fraction: float = 0.8
+    settle_frames: int = spec(10, ge=1)
+    load_fraction: float = spec(0.8, gt=0, le=1)
 
 
 @dataclass(frozen=True)
 class Estimates:
-    width_signal: str = "proxy"
+    width_signal: str = spec("proxy", choices=("proxy", "pdc"))
     min_speed_mm_s: float = 0.5
 
 
 @dataclass(frozen=True)
 class Pour:
-    rotation_rad: float = 0.015
+    rotation_rad: float = spec(0.015, gt=0)
     trough_prominence: float = 0.15
 
 
 @dataclass(frozen=True)
 class Contact:
-    method: str = "auto"
-    threshold_sigma: float = 6.0
-    despike_frames: int = 5
-    stored_uncertainty_counts: float = 10.0
+    method: str = spec("auto", choices=("auto", "pressure", "pattern"))
+    threshold_sigma: float = spec(6.0, gt=0)
+    despike_frames: int = spec(5, ge=1)
+    stored_uncertainty_counts: float = spec(10.0, ge=0)
 
 
 @dataclass(frozen=True)
 class Slip:
-    min_displacement_mm: float = 1.5
-    min_rotation_deg: float = 0.75
+    min_displacement_mm: float = spec(1.5, ge=0)
+    min_rotation_deg: float = spec(0.75, ge=0)
     views: tuple = ("bottom",)
 
 
@@ -138,15 +145,17 @@ def _typed(key: str, value, kind):
 
 
 def _section(cls, prefix: str, values: dict):
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(values) - set(fields))
+    try:
+        return build(cls, values, f"analysis.{prefix}")
+    except ConfigError as exc:
+        raise AnalysisConfigError(exc.key, exc.message) from None
+
+
+def _refuse_unknown(key: str, values, known) -> None:
+    unknown = sorted(set(values) - set(known))
     if unknown:
-        raise AnalysisConfigError(f"analysis.{prefix}.{unknown[0]}: unknown key; expected one of {sorted(fields)}")
-    out = {}
-    for name, value in values.items():
-        kind = type(fields[name].default)
-        out[name] = _typed(f"{prefix}.{name}", value, kind)
-    return cls(**out)
+        exc = unknown_key(key, unknown[0], known)
+        raise AnalysisConfigError(exc.key, exc.message)
 
 
 def _positive(key: str, value: float) -> None:
@@ -160,17 +169,13 @@ def load_config(node=None) -> AnalysisConfig:
     d = dict(raw)
     known = {"enabled", "tactile", "views", "flow", "baseline", "pressure", "segmentation", "estimates",
              "pour", "contact", "slip", "save_fields", "figures", "max_segment_figures", "progress"}
-    unknown = sorted(set(d) - known)
-    if unknown:
-        raise AnalysisConfigError(f"analysis.{unknown[0]}: unknown key; expected one of {sorted(known)}")
+    _refuse_unknown("analysis", d, known)
     tac = dict(d.get("tactile") or {})
     # intensity_range: "contact" (each contact window spans 0..255 up to its own peak), or [low, high] kΩ
     intensity = "contact" if tac.get("intensity_range", "contact") == "contact" else "fixed"
     if intensity == "contact":
         tac.pop("intensity_range", None)
-    bad = sorted(set(tac) - set(_TACTILE_KEYS))
-    if bad:
-        raise AnalysisConfigError(f"analysis.tactile.{bad[0]}: unknown key; expected one of {sorted(_TACTILE_KEYS)}")
+    _refuse_unknown("analysis.tactile", tac, _TACTILE_KEYS)
     fl = dict(d.get("flow") or {})
     reference = _typed("flow.reference", fl.pop("reference", "auto"), str)
     if reference not in REFERENCES:
@@ -181,10 +186,7 @@ def load_config(node=None) -> AnalysisConfig:
     if reference == "time" and (ref_time is None or not ref_time >= 0):
         raise AnalysisConfigError("analysis.flow.reference_time_s: expected a time ≥ 0 s (since run start) "
                                   f"with flow.reference=time, got {ref_time!r}")
-    bad = sorted(set(fl) - set(_FLOW_KEYS))
-    if bad:
-        raise AnalysisConfigError(f"analysis.flow.{bad[0]}: unknown key; expected one of "
-                                  f"{sorted(set(_FLOW_KEYS) | _FLOW_ANALYSIS_KEYS)}")
+    _refuse_unknown("analysis.flow", fl, set(_FLOW_KEYS) | _FLOW_ANALYSIS_KEYS)
     views = d.get("views", ["bottom", "left", "right"])
     if not isinstance(views, list) or not views or not all(isinstance(v, str) for v in views):
         raise AnalysisConfigError(f"analysis.views: expected a non-empty list of view names, got {views!r}")
@@ -207,46 +209,20 @@ def load_config(node=None) -> AnalysisConfig:
         msg = str(exc)
         raise AnalysisConfigError(msg if msg.startswith("analysis.") else f"analysis.{msg}") from None
     seg = _section(Segmentation, "segmentation", d.get("segmentation") or {})
-    for k in ("smooth_s", "min_contact_s", "distance_s", "contact_threshold_sigma"):
-        _positive(f"segmentation.{k}", getattr(seg, k))
-    if not 0 < seg.prominence < 1:
-        raise AnalysisConfigError(f"analysis.segmentation.prominence: expected a fraction in (0, 1), got {seg.prominence}")
-    if not 0 < seg.plateau_level < 1:
-        raise AnalysisConfigError(f"analysis.segmentation.plateau_level: expected a fraction in (0, 1), "
-                                  f"got {seg.plateau_level}")
-    if not 0 < seg.load_fraction <= 1:
-        raise AnalysisConfigError(f"analysis.segmentation.load_fraction: expected a fraction in (0, 1], "
-                                  f"got {seg.load_fraction}")
-    if seg.settle_frames < 1:
-        raise AnalysisConfigError(f"analysis.segmentation.settle_frames: expected an integer ≥ 1, got {seg.settle_frames}")
     est = _section(Estimates, "estimates", d.get("estimates") or {})
-    if est.width_signal not in ("proxy", "pdc"):
-        raise AnalysisConfigError(f"analysis.estimates.width_signal: expected proxy or pdc, got {est.width_signal!r}")
     pour = _section(Pour, "pour", d.get("pour") or {})
-    _positive("pour.rotation_rad", pour.rotation_rad)
     base = d.get("baseline") or {}
-    if set(base) - {"fallback_window_s", "fallback_contact_min"}:
-        raise AnalysisConfigError(f"analysis.baseline."
-                                  f"{sorted(set(base) - {'fallback_window_s', 'fallback_contact_min'})[0]}: unknown key")
+    _refuse_unknown("analysis.baseline", base, ("fallback_window_s", "fallback_contact_min"))
     window = _typed("baseline.fallback_window_s", base.get("fallback_window_s", 0.5), float)
     _positive("baseline.fallback_window_s", window)
     fb_min = _typed("baseline.fallback_contact_min", base.get("fallback_contact_min", 20.0), float)
     _positive("baseline.fallback_contact_min", fb_min)
     pres = d.get("pressure") or {}
-    if set(pres) - {"signal"}:
-        raise AnalysisConfigError(f"analysis.pressure.{sorted(set(pres) - {'signal'})[0]}: unknown key")
+    _refuse_unknown("analysis.pressure", pres, ("signal",))
     signal = _typed("pressure.signal", pres.get("signal", "auto"), str)
     if signal not in ("auto", "pdc", "proxy"):
         raise AnalysisConfigError(f"analysis.pressure.signal: expected auto, pdc or proxy, got {signal!r}")
     con = _section(Contact, "contact", d.get("contact") or {})
-    if con.method not in ("auto", "pressure", "pattern"):
-        raise AnalysisConfigError(f"analysis.contact.method: expected auto, pressure or pattern, got {con.method!r}")
-    _positive("contact.threshold_sigma", con.threshold_sigma)
-    if con.despike_frames < 1:
-        raise AnalysisConfigError(f"analysis.contact.despike_frames: expected an integer ≥ 1, got {con.despike_frames}")
-    if not con.stored_uncertainty_counts >= 0:
-        raise AnalysisConfigError(f"analysis.contact.stored_uncertainty_counts: expected a value ≥ 0, "
-                                  f"got {con.stored_uncertainty_counts}")
     sl = dict(d.get("slip") or {})
     if "views" in sl:
         if not isinstance(sl["views"], list) or not sl["views"] or not all(v in views for v in sl["views"]):
@@ -254,9 +230,6 @@ def load_config(node=None) -> AnalysisConfig:
                                       f"{views}, got {sl['views']!r}")
         sl["views"] = tuple(sl["views"])
     slip = _section(Slip, "slip", sl)
-    for k in ("min_displacement_mm", "min_rotation_deg"):
-        if not getattr(slip, k) >= 0:
-            raise AnalysisConfigError(f"analysis.slip.{k}: expected a value ≥ 0, got {getattr(slip, k)!r}")
     top = {k: _typed(k, d[k], t) for k, t in (("enabled", bool), ("save_fields", bool), ("figures", bool),
                                               ("max_segment_figures", int), ("progress", bool)) if k in d}
     return AnalysisConfig(tactile=tactile, views=tuple(views), baseline_fallback_window_s=window,

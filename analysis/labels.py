@@ -11,7 +11,9 @@ from them:
   contact, ``pour`` → ``initial_slip`` → ``rotation`` → ``downward`` → ``full_slip`` from the
   onsets found by :func:`pour_phases`;
 - **generic** (anything else, e.g. an imported recording): ``contact`` and ``no_contact``
-  stretches and one ``all`` segment covering the whole contact.
+  stretches (the first and last named ``approach`` and ``lift`` when the protocol declares
+  those), and one ``all`` segment covering the whole contact when the protocol declares it or
+  declares no labels at all (an imported recording). No undeclared label is produced.
 
 All indices are frame indices into the run's BioTac time axis; segments are ``[start, stop)``.
 """
@@ -73,19 +75,24 @@ def sweep_segments(finger: str, T: int, contacts, bumps_per_contact) -> list[Seg
     return out
 
 
-def generic_segments(finger: str, T: int, contacts) -> list[Segment]:
-    """``no_contact`` / ``contact`` stretches and one ``all`` over the whole contact."""
+def generic_segments(finger: str, T: int, contacts, declared=()) -> list[Segment]:
+    """``no_contact`` / ``contact`` stretches and one ``all`` over the whole contact, as the
+    ``declared`` labels allow (module doc; none declared: all of them)."""
+    declared = set(declared or ())
+    first = "approach" if "approach" in declared else "no_contact"
+    last = "lift" if "lift" in declared else "no_contact"
     out: list[Segment] = []
     pos = 0
     for c, (a, b) in enumerate(contacts):
         if a > pos:
-            out.append(Segment("no_contact", finger, pos, a))
+            out.append(Segment(first if c == 0 else "no_contact", finger, pos, a))
         out.append(Segment("contact", finger, a, b, contact=c))
         pos = b
     if contacts:
         if pos < T:
-            out.append(Segment("no_contact", finger, pos, T))
-        out.append(Segment("all", finger, contacts[0][0], contacts[-1][1], contact=0))
+            out.append(Segment(last, finger, pos, T))
+        if not declared or "all" in declared:
+            out.append(Segment("all", finger, contacts[0][0], contacts[-1][1], contact=0))
     return out
 
 

@@ -153,7 +153,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
         pour = _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin)
     else:
         for f, ivs in contacts.items():
-            segments += lab.generic_segments(f, T, ivs)
+            segments += lab.generic_segments(f, T, ivs, run.labels)
     kept = []
     for sg in segments:
         if sg.frames() < 2:

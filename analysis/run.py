@@ -71,7 +71,8 @@ def _headline(a, score: dict | None) -> dict:
                                            "rotation_deg", "confidence")} for f, e in slips.items()}
     if score:
         s = score["summary"]
-        for k in ("direction_correct_fraction", "width_error_mm_median", "boundary_error_ms_median",
+        for k in ("direction_correct_fraction", "width_error_mm_median", "boundary_error_mm_median",
+                  "boundary_error_ms_median",
                   "slip_onset_error_ms", "slip_direction_correct_fraction", "rotation_sense_correct_fraction",
                   "touch_vs_slip_correct_fraction", "slip_class_correct_fraction"):
             if s.get(k) is not None:
@@ -192,8 +193,25 @@ def _report(console, run_dir, summary, score) -> None:
     if h.get("status") == "no_contact":
         msg += " (no contact found: nothing to segment)"
     if score is not None:
-        msg += f"; score: targets {'met' if score.get('all_targets_met') else 'NOT all met'}"
+        msg += f"; score: {score_line(score)}"
     console(msg)
+
+
+def score_line(score: dict) -> str:
+    """The score in a few words: targets met, or which failed and by how much."""
+    targets = score.get("targets") or {}
+    if not targets:
+        return "no target applies (the protocol declares nothing the truth can score)"
+    failed = [f"{k} {_num(t['value'])} (target {'≥' if k.endswith('fraction') else '≤'} {_num(t['target'])}"
+              + (f", {t['reason']}" if t.get("reason") else "") + ")"
+              for k, t in targets.items() if not t["met"]]
+    if not failed:
+        return f"targets met ({len(targets)} of {len(targets)})"
+    return f"targets NOT met ({len(failed)} of {len(targets)}): " + "; ".join(failed)
+
+
+def _num(v) -> str:
+    return "none" if v is None else f"{v:.3g}"
 
 
 __all__ = ["analyze_run", "AnalysisInputError"]

@@ -16,7 +16,9 @@ Scores:
   sweep direction in the world frame, folded into 0..90°;
 - boundaries (ms): ``before`` start vs the truth contact start, ``after`` end vs the contact
   end, ``during`` start/end vs the times the pad's lowest point passes the feature's edges
-  (centre_time ∓ width / 2 / speed); pour phase onsets vs the truth onsets;
+  (centre_time ∓ width / 2 / speed); pour phase onsets vs the truth onsets. A sweep's
+  boundaries are places on the board, so their target is in mm of travel (the time error ×
+  the sweep's speed): the same 0.4 mm is 80 ms at 5 mm/s and 20 ms at 20 mm/s;
 - slip onset (ms): the ``initial_slip`` onset vs the truth ``slip_onset``;
 - object motions under a still finger (``truth/object_motions``, the slip-in-place protocol):
   each motion against the slip estimate of the finger's ``contact`` segment that overlaps it
@@ -37,8 +39,8 @@ import numpy as np
 from . import estimates as est
 from . import labels as lab
 
-TARGETS = {"direction_correct_fraction": 1.0, "width_error_mm_median": 1.0, "boundary_error_ms_median": 50.0,
-           "slip_onset_error_ms": 100.0}
+TARGETS = {"direction_correct_fraction": 1.0, "width_error_mm_median": 1.0, "boundary_error_mm_median": 0.75,
+           "boundary_error_ms_median": 50.0, "slip_onset_error_ms": 100.0}
 DIRECTION_OK_DEG = 30.0
 SLIP_DIRECTION_OK_DEG = 45.0
 SLIP_TARGETS = {"slip_direction_correct_fraction": 1.0, "rotation_sense_correct_fraction": 1.0,
@@ -61,7 +63,7 @@ def score(analysis, truth: dict) -> dict:
     sweeps = truth.get("sweeps", {})
     contacts = truth.get("contacts", {})
     names = [_s(n) for n in np.atleast_1d(feats.get("name", []))]
-    boundary_ms = []
+    boundary_ms, boundary_mm = [], []
     cr = analysis.crossings
     seg_by = {}
     for sg in analysis.segments:
@@ -126,6 +128,8 @@ def score(analysis, truth: dict) -> dict:
                 errs["during_end"] = 1e3 * (_seg_end(time, during) - (centre + half))
             row["boundary_errors_ms"] = errs
             boundary_ms += [abs(v) for v in errs.values()]
+            if speed > 0:
+                boundary_mm += [abs(v) * 1e-3 * speed for v in errs.values()]
         out["crossings"].append(row)
     # height ranking
     pairs = ok = 0
@@ -175,6 +179,7 @@ def score(analysis, truth: dict) -> dict:
          "height_ranking_note": None if pairs else "all features have the same height: ranking not scored",
          "boundary_error_ms_median": float(np.median(boundary_ms)) if boundary_ms else None,
          "boundary_error_ms_max": float(np.max(boundary_ms)) if boundary_ms else None,
+         "boundary_error_mm_median": float(np.median(boundary_mm)) if boundary_mm else None,
          "slip_onset_error_ms": slip_err}
     motions = _object_motions(analysis, truth, t0)
     if motions is not None:
@@ -186,9 +191,9 @@ def score(analysis, truth: dict) -> dict:
             out["targets"][key] = {"target": limit, "value": s[key], "met": s[key] >= limit}
     for key, limit in TARGETS.items():
         v = s.get(key)
-        applicable = not (key == "slip_onset_error_ms" and not analysis.pour) and \
-            not (key in ("direction_correct_fraction", "width_error_mm_median") and not n_truth) and \
-            not (key == "boundary_error_ms_median" and not n_truth and not analysis.pour)
+        applicable = not (key in ("slip_onset_error_ms", "boundary_error_ms_median") and not analysis.pour) and \
+            not (key in ("direction_correct_fraction", "width_error_mm_median", "boundary_error_mm_median")
+                 and not n_truth)
         if not applicable:
             continue
         if v is None:

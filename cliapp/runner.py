@@ -8,11 +8,13 @@ SIGTERM into one line and exit status 3.
 from __future__ import annotations
 
 import os
+import re
 import signal
 import sys
 import traceback
 
 from runstore.status import ExitCode
+from validation import suggest, unknown_key
 
 from .config_guard import install
 
@@ -53,8 +55,37 @@ def report(exc: BaseException, what: str, verbose: bool = False) -> None:
 
 
 def error_line(exc: BaseException) -> str:
-    """An exception and its cause as one line (Hydra's messages span several)."""
+    """An exception and its cause as one line (Hydra's messages span several). An override
+    of a key that does not exist is named with the nearest known key, in place of Hydra's
+    hint to add it with ``+`` (which :func:`protocols.schema.check_config` would refuse)."""
+    cause = exc.__cause__
+    if "Could not override" in str(exc) and getattr(cause, "parent_node", None) is not None \
+            and isinstance(getattr(cause, "key", None), str) and getattr(cause, "full_key", None):
+        parent = cause.full_key[:-len(cause.key)].rstrip(".")
+        return str(unknown_key(parent, cause.key, _known_keys(parent, cause.parent_node.keys())))
+    missing = re.search(r"Could not find '([\w/]+)/([^']+)'", str(exc))
+    if missing:                                   # a group option that does not exist
+        group, name = missing.groups()
+        listed = str(exc).split("Available options in", 1)[-1].split("Config search path", 1)[0]
+        options = [w.strip() for w in listed.splitlines()[1:] if w.strip()] if "Available" in str(exc) else []
+        near = suggest(name, options)
+        return (f"{group.replace('/', '.')}={name}: no such {group.split('/')[-1]}"
+                + (f"; expected one of {', '.join(options)}" if options else "")
+                + (f"; did you mean `{near}`?" if near else ""))
     parts = [str(exc)]
     if exc.__cause__ is not None and str(exc.__cause__) not in parts[0]:
         parts.append(str(exc.__cause__))
     return "; ".join(line.strip() for part in parts for line in part.splitlines() if line.strip())
+
+
+def _known_keys(parent: str, composed) -> list[str]:
+    """The keys a node may have: a step's parameters for ``...steps[i].<kind>``, else the
+    keys the composed node has."""
+    step = re.search(r"steps\[\d+\]\.(\w+)$", parent)
+    if step:
+        from dataclasses import fields
+
+        from .steps import STEP_KINDS
+        if step.group(1) in STEP_KINDS:
+            return [f.name for f in fields(STEP_KINDS[step.group(1)]) if f.name != "key"]
+    return list(composed)

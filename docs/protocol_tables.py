@@ -146,7 +146,9 @@ def targets_table() -> str:
     rows = ["| target | met when | checked on |", "| --- | --- | --- |"]
     where = {"direction_correct_fraction": "runs whose truth has feature crossings (sweeps)",
              "width_error_mm_median": "runs whose truth has feature crossings (sweeps)",
-             "boundary_error_ms_median": "every scored run (a run with no boundary to measure counts as not met)",
+             "boundary_error_mm_median": "sweeps: segment boundaries in mm of travel (time error × sweep speed; "
+                                         "a run with no boundary to measure counts as not met)",
+             "boundary_error_ms_median": "pours: phase onsets (a run with no onset found counts as not met)",
              "slip_onset_error_ms": "pours (the analysis found pour phases)"}
     for key, limit in score.TARGETS.items():
         u = re.search(r"_(mm|ms|deg)(?:_|$)", key)

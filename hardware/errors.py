@@ -60,25 +60,8 @@ class WorkspaceError(SafetyError, ValueError):
     """A commanded pose lies outside the configured workspace box."""
 
 
-class ConfigError(ValueError):
-    """Invalid configuration. ``key`` is the dotted config key at fault."""
-
-    def __init__(self, key: str, message: str):
-        self.key = key
-        super().__init__(f"{key}: {message}")
-
-
-def brief(value, limit: int = 60) -> str:
-    """``value`` for a message: a number in at most 6 significant digits when written out it
-    is long (a 300-digit number is not a message), anything else cut to ``limit`` characters."""
-    if type(value).__module__ == "numpy" and hasattr(value, "item"):
-        value = value.item()
-    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 50:
-        return f"{float(value):.6g}" if value.bit_length() <= 1000 else f"a {value.bit_length()}-bit whole number"
-    text = repr(value)
-    if isinstance(value, float) and len(text) > 16:
-        return f"{value:.6g}"
-    return text if len(text) <= limit else text[:limit] + "..."
+# one error and one message format for every config node (the validation layer)
+from validation import ConfigError, brief  # noqa: E402,F401
 
 
 def require_positive(cfg, names, key: str) -> None:

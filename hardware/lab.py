@@ -34,8 +34,10 @@ from .serial_biotac import SerialBiotacConfig, SerialBiotacs
 from .serial_pour import SerialPump, SerialPumpConfig, SerialScale, SerialScaleConfig
 from .shadow import RosbridgeBiotacConfig, RosbridgeBiotacs, ShadowHand, ShadowHandConfig
 from .rosbridge import RosbridgeConfig
+from validation import build, to_plain, unknown_key
+
+from .config import WorkspaceConfig
 from .lab_container import Lab
-from .sim.config import WorkspaceConfig, build, to_plain
 from .surfaces import load_surface
 
 TOP_KEYS = ("backend", "fingers", "workspace", "arm", "fingertips", "rosbridge", "hand", "biotac", "pump", "scale",
@@ -56,7 +58,7 @@ def make_real_lab(hw_cfg, surface_cfg=None, *, key: str = "hardware") -> Lab:
         raise ConfigError(key, f"expected a mapping, got {type(hw).__name__}")
     unknown = sorted(set(hw) - set(TOP_KEYS))
     if unknown:
-        raise ConfigError(f"{key}.{unknown[0]}", f"unknown key; expected one of {', '.join(TOP_KEYS)}")
+        raise unknown_key(key, unknown[0], TOP_KEYS)
     fingers = check_fingers(hw.get("fingers", FINGERS), f"{key}.fingers")
     workspace = build(WorkspaceConfig, hw.get("workspace"), f"{key}.workspace")
     _check_fingertips(hw.get("fingertips"), fingers, f"{key}.fingertips")
@@ -108,8 +110,7 @@ def _make(cls, data, key: str, **fixed):
     names = {f.name for f in dataclasses.fields(cls)}
     for k in data:
         if k not in names or k == "key" or k in fixed:
-            expected = sorted(names - set(fixed) - {"key"})
-            raise ConfigError(f"{key}.{k}", f"unknown key; expected one of {', '.join(expected)}")
+            raise unknown_key(key, k, names - set(fixed) - {"key"})
     try:
         obj = build(cls, data, key)               # type checks, naming the key
     except TypeError as exc:                      # a required field missing

@@ -89,8 +89,8 @@ class UR10Config:
         arm = dict(arm)
         unknown = set(arm) - set(cls.__dataclass_fields__) - {"workspace"}
         if unknown:
-            raise ConfigError(f"{key}.{sorted(unknown)[0]}", f"unknown setting; expected some of "
-                                                             f"{sorted(set(cls.__dataclass_fields__) - {'key'})}")
+            from validation import unknown_key
+            raise unknown_key(key, sorted(unknown)[0], set(cls.__dataclass_fields__) - {"key"} | {"workspace"})
         ws = workspace if workspace is not None else arm.pop("workspace", None)
         arm.pop("workspace", None)
         if ws is not None:

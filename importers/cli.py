@@ -1,7 +1,7 @@
 """``tactile-import``: bring a ROS bag or CSV recording into a run store (Hydra app, ``conf/import.yaml``).
 
-    tactile-import source=lab/rest.bag                       # -> imported/rest/run.zarr
-    tactile-import source=csvs/ rate_hz=100 baseline=estimate out=imported/s3
+    tactile-import source=lab/rest.bag                       # -> outputs/imported/rest/run.zarr
+    tactile-import source=csvs/ rate_hz=100 baseline=estimate out=outputs/imported/s3
     tactile-import source=press.csv calibration=cal.json fingers=[mf]
 
 Exit status: 0 imported, 2 bad input (one line on stderr naming the file and, for a CSV, the
@@ -47,6 +47,10 @@ def settings_from(cfg) -> ImportSettings:
 
 def run(cfg, overrides=(), console=print) -> int:
     """One import; never raises. Returns the exit code."""
+    if OmegaConf.is_missing(cfg, "source"):
+        print("import error: source: missing; expected source=PATH (a .bag, a ROS2 bag directory, a .csv "
+              "or a directory of them)", file=sys.stderr)
+        return BAD_INPUT
     try:
         import_source(cfg.source, cfg.out, settings_from(cfg), config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
                       overrides=overrides, console=console)

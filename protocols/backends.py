@@ -26,7 +26,7 @@ def check_hardware(cfg) -> None:
     """Check every value of ``cfg.hardware`` (a ``ConfigError`` naming the key) without
     connecting anything: what ``plan_only`` does in place of :func:`make_lab`."""
     if cfg.hardware.get("backend") == "sim":
-        from hardware.sim.config import load_config
+        from hardware.config import load_config
         load_config(cfg.hardware)                 # the values only: no simulated world is built
     else:
         make_lab(cfg)                             # real drivers check their configs when made, unconnected

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
 from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
@@ -140,6 +141,10 @@ def _app(cfg) -> None:
 
 
 def main() -> None:
+    if sys.argv[1:] in (["--list"], ["list"]):                 # what there is to run, one line each
+        from .listing import listing
+        print(listing(CONF_DIR))
+        sys.exit(0)
     register()
     logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
     _interrupts.install()                    # the run owns Ctrl-C and SIGTERM (protocols.interrupts)
@@ -150,19 +155,27 @@ def main() -> None:
 class RunDirLock(Callback):
     """One run directory, one writer: lock ``hydra.run.dir`` (``hydra.sweep.dir`` with ``-m``)
     before Hydra writes anything there (:mod:`runstore.rundir`); a second ``tactile-run``
-    on the same directory is refused with one line, exit 2, leaving the first one's files alone."""
+    on the same directory is refused with one line, exit 2, leaving the first one's files alone.
+    A job that recorded nothing (``plan_only``, a bad config, a failed connection) leaves no
+    directory (:func:`runstore.rundir.remove_if_unused`)."""
 
     def on_run_start(self, config, **kwargs) -> None:
         self._take(config.hydra.run.dir)
 
     def on_run_end(self, config, **kwargs) -> None:
         rundir.release(config.hydra.run.dir)
+        rundir.remove_if_unused(config.hydra.run.dir)      # nothing ran: no empty run directory
+
+    def on_job_end(self, config, job_return=None, **kwargs) -> None:
+        if config.hydra.mode == RunMode.MULTIRUN:
+            rundir.remove_if_unused(config.hydra.runtime.output_dir)
 
     def on_multirun_start(self, config, **kwargs) -> None:
         self._take(config.hydra.sweep.dir)
 
     def on_multirun_end(self, config, **kwargs) -> None:
         rundir.release(config.hydra.sweep.dir)
+        rundir.remove_if_unused(config.hydra.sweep.dir)
 
     @staticmethod
     def _take(directory) -> None:

@@ -234,7 +234,6 @@ class RunEngine:
         self.progress_factory = progress_factory
         self.log = log
         self.ctx = RunContext(lab, recorder, cfg, live=live)
-        self._display = live.display if live is not None else None
         self._own_interrupts = interrupts is None
         self.interrupts = interrupts or Interrupts(log)
         self.done = 0                              # steps ended so far
@@ -326,8 +325,6 @@ class RunEngine:
                                                     "expected_s": round(planned.duration, 3)})
         bar = self.progress_factory(planned) if self.progress_factory else None
         self.ctx.progress = bar.update if bar else None
-        if bar and self.ctx.live is not None:         # the live line rides on the step's bar
-            self.ctx.live.display = bar.set_postfix_str
         try:
             try:
                 step.run(self.ctx)
@@ -344,8 +341,6 @@ class RunEngine:
             if bar:
                 bar.close()
             self.ctx.progress = None
-            if self.ctx.live is not None:
-                self.ctx.live.display = self._display
         self.ctx.event("step_end", planned.name, {"key": step.key})
 
     def _make_safe(self, retract: bool) -> None:

@@ -42,29 +42,30 @@ class Press(Step):
     depth: float = 5.0
     speed: float = 1.0
 
-    def _force(self, ctx) -> float:
-        return ctx.params.press_force if self.force is None else self.force
+    def resolve(self, ctx) -> dict:
+        return {"force": ctx.params.press_force if self.force is None else self.force,
+                "travel_speed": ctx.params.travel_speed}
 
     def targets(self, ctx) -> tuple[np.ndarray, np.ndarray]:
         above = ctx.pose_above(self.at, self.height, f"{self.key}.at")
         return above, ctx.pose_at_depth(above, self.depth)
 
     def plan(self, ctx):
-        force = self._force(ctx)
+        force, travel_speed = self.resolve(ctx).values()
         if not 0 < force <= ctx.limits.max_force:
             raise ProtocolError(f"{self.key}.force", f"expected a force in (0, {ctx.limits.max_force}] N "
                                                      f"(hardware.arm.max_contact_force_n), got {force}")
         _positive(self.height, f"{self.key}.height")
         _positive(self.depth, f"{self.key}.depth")
         above, bottom = self.targets(ctx)
-        w1, d1 = ctx.linear(above, ctx.params.travel_speed, self.key)
+        w1, d1 = ctx.linear(above, travel_speed, self.key)
         w2, d2 = ctx.linear(bottom, self.speed, self.key)
         return w1 + w2, d1 + d2
 
     def run(self, ctx):
-        force = self._force(ctx)
+        force, travel_speed = self.resolve(ctx).values()
         above, bottom = self.targets(ctx)
-        ctx.move(above, ctx.params.travel_speed)
+        ctx.move(above, travel_speed)
         if not ctx.move(bottom, self.speed, until=Criterion(force=force)):
             raise RuntimeError(f"{self.key}: the force never reached {force} N, {self.depth} mm below the "
                                f"surface top (is the object there?)")

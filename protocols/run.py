@@ -7,6 +7,7 @@ point with the path of the run store: ``protocols`` never imports ``analysis``.
 
 from __future__ import annotations
 
+import sys
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
@@ -28,6 +29,7 @@ from .backends import check_hardware, make_lab
 from .live import (LiveConfig, LiveMonitor, live_fingers, live_settings, open_viewer, tactile_config, terminal_display,
                    viewer_names, warm_up)
 from .plan import Plan, format_timeline, make_plan
+from .schema import check_config
 from .recorder import Recorder
 from .steps import ProtocolError
 
@@ -57,6 +59,7 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
     ``interrupts`` owns Ctrl-C and SIGTERM (installed here when not given).
     """
     run_dir = Path(run_dir)
+    check_config(cfg)
     plan = make_plan(cfg)
     live, model = live_setup(cfg, plan, build=not cfg.plan_only)
     if cfg.plan_only:
@@ -84,19 +87,24 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
                 lab.truth.conditions = _conditions(cfg, lab, stored, plan)
             recorder = Recorder(store, lab.sources(), lab.clock)
             monitor, outcome = None, Outcome(FAILED, "the run engine could not start")
+            screen = ProgressConsole() if cfg.progress else None
             try:
                 if not plan.setup:
                     recorder.start()
                 if model:
                     viewer = open_viewer(live.viewer, live_fingers(live, lab.biotac.fingers), model, run_dir, console)
                     monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
-                                          display=None if cfg.progress else terminal_display(), viewer=viewer)
-                outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=_bars(cfg.progress), log=console,
+                                          display=screen.live_line() if screen else terminal_display(),
+                                          viewer=viewer)
+                outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=screen.bar if screen else None,
+                                    log=console,
                                     live=monitor, interrupts=interrupts).run(
                     start_recording=recorder.start if plan.setup else None)
             except Exception as exc:              # the engine never raises past its safe stop; this is the rest
                 outcome = Outcome(FAILED, f"{type(exc).__name__}: {exc}")
             finally:
+                if screen:
+                    screen.close()
                 outcome, stats = _close(run_dir, prov, recorder, monitor, lab, outcome)
     return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)
 
@@ -206,13 +214,32 @@ def _calibration(lab) -> dict:
             "baseline_counts": {f: [float(x) for x in v] for f, v in baselines.items()}}
 
 
-def _bars(enabled: bool):
-    """A progress bar per step, over its expected duration (clock seconds)."""
-    if not enabled:
-        return None
+class ProgressConsole:
+    """The console of a run with ``progress=true``: a progress bar per step, over its expected
+    duration (clock seconds), and under it the live monitor's operator line (finger, flow
+    arrow, slip state) as a status line, both redrawn in place by tqdm. The live line needs a
+    terminal (it rewrites itself); the bars go to ``stream`` as tqdm's always do."""
 
-    def make(planned):
+    def __init__(self, stream=None):
+        self.stream = stream if stream is not None else sys.stderr
+        self.status = None
+
+    def bar(self, planned):
         return tqdm(total=round(max(planned.duration, 0.01), 2), unit="s", leave=False, dynamic_ncols=True,
-                    desc=f"step {planned.index:02d} {planned.step.kind:<8}",
+                    position=0, file=self.stream, desc=f"step {planned.index:02d} {planned.step.kind:<8}",
                     bar_format="{desc} {percentage:3.0f}%|{bar:24}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}]")
-    return make
+
+    def live_line(self):
+        """The live monitor's display: the status line (None when not a terminal)."""
+        return self._show if self.stream.isatty() else None
+
+    def _show(self, line: str) -> None:
+        if self.status is None:
+            self.status = tqdm(total=0, position=1, leave=False, dynamic_ncols=True, file=self.stream,
+                               bar_format="{desc}")
+        self.status.set_description_str(line)
+
+    def close(self) -> None:
+        if self.status is not None:
+            self.status.close()
+            self.status = None

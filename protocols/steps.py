@@ -9,7 +9,8 @@ the YAML key at fault (``protocol.steps[2].sweep.speed``). Each step class knows
 - ``run(ctx)``: execute against the hardware interfaces (see :mod:`protocols.engine`).
 
 Adding a step kind is one class here with its fields, ``plan`` and ``run``, decorated
-with :func:`step`. ``hold`` and ``pour`` may react to slip (``until: slip``, ``on_slip:
+with :func:`step`; the protocol's defaults it takes (``speed`` from ``protocol.sweep_speed``...)
+are filled in by its ``resolve``, which both ``plan`` and ``run`` call. ``hold`` and ``pour`` may react to slip (``until: slip``, ``on_slip:
 [...]``, see ``docs/live.md``); reactions are :class:`Reaction` steps, which act at once. Units are the protocol's: mm, mm/s, s, N, ml, ml/min, rad.
 
 Surface references (``at``/``to``): ``before:<feature>``, ``after:<feature>``, or
@@ -27,16 +28,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hardware.errors import brief
 from hardware.hand import JOINT_NAMES
+from validation import ConfigError, brief, unknown_key
 
 
-class ProtocolError(ValueError):
+class ProtocolError(ConfigError):
     """A protocol that cannot run as written; ``key`` is the YAML key at fault."""
-
-    def __init__(self, key: str, message: str):
-        self.key = key
-        super().__init__(f"{key}: {message}")
 
 
 STEP_KINDS: dict[str, type[Step]] = {}
@@ -74,6 +71,11 @@ class Step:
 
     kind: ClassVar[str] = ""
     key: str = field(default="", repr=False)
+
+    def resolve(self, ctx) -> dict:
+        """The step's parameters with the protocol's defaults (``ctx.params``) filled in: the
+        one place a default is chosen, used by both ``plan`` and ``run``."""
+        return {}
 
     def plan(self, ctx) -> tuple[list[np.ndarray], float]:
         """Advance ``ctx`` (a :class:`protocols.plan.PlanContext`); return (waypoints, seconds)."""
@@ -134,11 +136,14 @@ class MoveTo(Step):
             return ctx.home.copy()
         return ctx.pose_over(self.at, self.margin, self.height, f"{self.key}.at")
 
+    def resolve(self, ctx) -> dict:
+        return {"speed": self.speed or ctx.params.travel_speed}
+
     def plan(self, ctx):
-        return ctx.linear(self.target(ctx), self.speed or ctx.params.travel_speed, self.key)
+        return ctx.linear(self.target(ctx), self.resolve(ctx)["speed"], self.key)
 
     def run(self, ctx):
-        ctx.move(self.target(ctx), self.speed or ctx.params.travel_speed)
+        ctx.move(self.target(ctx), self.resolve(ctx)["speed"])
 
 
 @step
@@ -155,12 +160,15 @@ class Approach(Step):
     def target(self, ctx) -> np.ndarray:
         return ctx.pose_at_depth(ctx.pose, self.depth)
 
+    def resolve(self, ctx) -> dict:
+        return {"speed": self.speed or ctx.params.approach_speed}
+
     def plan(self, ctx):
         ctx.check_criterion(self.until, f"{self.key}.until")
-        return ctx.linear(self.target(ctx), self.speed or ctx.params.approach_speed, self.key)
+        return ctx.linear(self.target(ctx), self.resolve(ctx)["speed"], self.key)
 
     def run(self, ctx):
-        ctx.move(self.target(ctx), self.speed or ctx.params.approach_speed, until=self.until)
+        ctx.move(self.target(ctx), self.resolve(ctx)["speed"], until=self.until)
 
 
 @step
@@ -178,12 +186,16 @@ class Sweep(Step):
         goal[2] = ctx.pose[2]                              # keep the hold depth
         return goal
 
+    def resolve(self, ctx) -> dict:
+        return {"speed": self.speed or ctx.params.sweep_speed}
+
     def plan(self, ctx):
-        return ctx.linear(self.target(ctx), self.speed or ctx.params.sweep_speed, self.key)
+        return ctx.linear(self.target(ctx), self.resolve(ctx)["speed"], self.key)
 
     def run(self, ctx):
-        ctx.event("sweep", self.key, {"speed_mm_s": self.speed or ctx.params.sweep_speed, "to": self.to})
-        ctx.move(self.target(ctx), self.speed or ctx.params.sweep_speed)
+        speed = self.resolve(ctx)["speed"]
+        ctx.event("sweep", self.key, {"speed_mm_s": speed, "to": self.to})
+        ctx.move(self.target(ctx), speed)
 
 
 @step
@@ -200,11 +212,14 @@ class Lift(Step):
         goal[2] += self.height * 1e-3
         return goal
 
+    def resolve(self, ctx) -> dict:
+        return {"speed": self.speed or ctx.params.travel_speed}
+
     def plan(self, ctx):
-        return ctx.linear(self.target(ctx), self.speed or ctx.params.travel_speed, self.key)
+        return ctx.linear(self.target(ctx), self.resolve(ctx)["speed"], self.key)
 
     def run(self, ctx):
-        ctx.move(self.target(ctx), self.speed or ctx.params.travel_speed)
+        ctx.move(self.target(ctx), self.resolve(ctx)["speed"])
 
 
 # ----------------------------------------------------------------------------- hand
@@ -385,9 +400,12 @@ class Pour(Step):
         """With ``until`` or ``on_slip`` the step lasts as long as the pour (volume / rate)."""
         return self.until is not None or bool(self.on_slip)
 
+    def resolve(self, ctx) -> dict:
+        return {"rate": ctx.params.pour_rate if self.rate is None else self.rate,
+                "volume": ctx.params.pour_volume if self.volume is None else self.volume}
+
     def plan(self, ctx):
-        rate = ctx.params.pour_rate if self.rate is None else self.rate
-        volume = ctx.params.pour_volume if self.volume is None else self.volume
+        rate, volume = self.resolve(ctx).values()
         _positive(rate, f"{self.key}.rate")
         _positive(volume, f"{self.key}.volume")
         if rate > ctx.limits.max_pump_rate:
@@ -403,8 +421,7 @@ class Pour(Step):
         return _still(ctx, volume / rate * 60.0, f"{self.key}.volume") if self.waits else ([], 0.0)
 
     def run(self, ctx):
-        rate = ctx.params.pour_rate if self.rate is None else self.rate
-        volume = ctx.params.pour_volume if self.volume is None else self.volume
+        rate, volume = self.resolve(ctx).values()
         ctx.event("pour", self.key, {"rate_ml_min": rate, "volume_ml": volume})
         ctx.lab.pump.dispense(volume, rate)
         if self.waits:
@@ -421,14 +438,16 @@ class Hold(Step):
     until: Criterion | None = None
     on_slip: list[Step] | None = None
 
+    def resolve(self, ctx) -> dict:
+        return {"duration": ctx.params.hold_time if self.duration is None else self.duration}
+
     def plan(self, ctx):
         ctx.check_criterion(self.until, f"{self.key}.until")
         _check_reactions(ctx, self.on_slip, f"{self.key}.on_slip")
-        return _still(ctx, ctx.params.hold_time if self.duration is None else self.duration,
-                      f"{self.key}.duration")
+        return _still(ctx, self.resolve(ctx)["duration"], f"{self.key}.duration")
 
     def run(self, ctx):
-        _wait_reacting(ctx, ctx.params.hold_time if self.duration is None else self.duration, self)
+        _wait_reacting(ctx, self.resolve(ctx)["duration"], self)
 
 
 def _wait_reacting(ctx, seconds: float, s) -> None:
@@ -504,7 +523,8 @@ def parse_step(item, key: str, depth: int = 0) -> Step:
                                  f"{sorted(STEP_KINDS)}, got {item!r}")
     (kind, params), = item.items()
     if kind not in STEP_KINDS:
-        raise ProtocolError(key, f"unknown step kind {kind!r}; expected one of {sorted(STEP_KINDS)}")
+        expected = unknown_key(key, kind, STEP_KINDS, what="step kind").message.split("; ", 1)[1]
+        raise ProtocolError(key, f"unknown step kind {kind!r}; {expected}")
     cls = STEP_KINDS[kind]
     key = f"{key}.{kind}"
     params = {} if params is None else params
@@ -513,7 +533,7 @@ def parse_step(item, key: str, depth: int = 0) -> Step:
     fields = {f.name: f for f in dataclasses.fields(cls) if f.name != "key"}
     unknown = sorted(set(params) - set(fields))
     if unknown:
-        raise ProtocolError(f"{key}.{unknown[0]}", f"unknown parameter; {kind} takes {sorted(fields)}")
+        raise _protocol_error(unknown_key(key, unknown[0], fields, what="parameter"))
     values = {name: _convert(value, fields[name].type, f"{key}.{name}") for name, value in params.items()}
     if kind == "repeat":
         values["steps"] = parse_steps(params.get("steps"), f"{key}.steps", depth + 1)
@@ -530,6 +550,10 @@ def parse_reactions(items, key: str) -> list[Step]:
             raise ProtocolError(f"{key}[{i}].{s.kind}", f"cannot react to slip (it would hold the reaction up); "
                                                         f"on_slip takes {', '.join(REACTIONS)}")
     return steps
+
+
+def _protocol_error(exc: ConfigError) -> ProtocolError:
+    return ProtocolError(exc.key, exc.message)
 
 
 _SCALARS = {"float": (int, float), "int": (int,), "str": (str,), "bool": (bool,)}
@@ -553,7 +577,7 @@ def _convert(value, annotation: str, key: str) -> Any:
             names = {f.name for f in dataclasses.fields(Criterion)}
             unknown = sorted(set(value) - names)
             if unknown:
-                raise ProtocolError(f"{key}.{unknown[0]}", f"unknown criterion; expected one of {sorted(names)}")
+                raise _protocol_error(unknown_key(key, unknown[0], names, what="criterion"))
             if not value:
                 raise ProtocolError(key, f"expected at least one criterion of {sorted(names)}")
             if "pdc_rise" in value and "contact_lost" in value:

@@ -21,8 +21,6 @@ recovery could not be written (a full disk; nothing is lost).
 
 from __future__ import annotations
 
-import argparse
-import json
 import sys
 import warnings
 from pathlib import Path
@@ -145,8 +143,31 @@ def _walk(group, prefix=""):
         yield from _walk(sub, f"{prefix}{name}/")
 
 
+EPILOG = """examples:
+  tactile-recover outputs/2026-01-01/12-00-00-000000_straws_sweep     # a run directory
+  tactile-recover outputs/*/*/run.zarr                                 # stores: closed ones are left alone
+
+exit status: 0 recovered (or nothing to do), 2 not a run store or still recording (one line),
+1 the recovery could not be written (a full disk; nothing is lost)."""
+
+
+def describe(result: dict) -> str:
+    """One sentence for the operator from :func:`recover`'s result."""
+    if result["action"] != "recovered":
+        extra = "; its run.json was written" if result.get("run_json") else ""
+        return f"{result['path']}: nothing to do, the run was closed ({result['status']}){extra}"
+    trimmed = sum(result["trimmed"].values())
+    text = (f"{result['path']}: recovered as crashed; its data ends at {result['last_sample_s']:.2f} s of run time"
+            + (f"; {trimmed} rows written after the last commit were dropped" if trimmed else "")
+            + (f"; {len(result['dropped_unpublished'])} unpublished groups or arrays deleted"
+               if result["dropped_unpublished"] else "") + "; run.json written")
+    return text
+
+
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="tactile-recover", description=__doc__.splitlines()[0])
+    from validation.cli import ArgumentParser
+    parser = ArgumentParser(prog="tactile-recover", description=__doc__.replace("``", "").split("\nExit status")[0],
+                            epilog=EPILOG)
     parser.add_argument("paths", nargs="+", help="run.zarr directories (or run directories holding one)")
     args = parser.parse_args(argv)
     code = 0
@@ -164,7 +185,7 @@ def main(argv=None) -> int:
                   f"nothing was lost: run tactile-recover again once it can write", file=sys.stderr)
             code = max(code, 1)
             continue
-        print(json.dumps(result))
+        print(describe(result))
     return code
 
 

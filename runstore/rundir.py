@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import shutil
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -59,6 +60,30 @@ def release(directory) -> None:
     if entry[1] == 0:
         del _held[key]
         os.close(entry[0])                 # closing the descriptor releases the flock
+
+
+#: what Hydra and the lock put in a run directory before a run starts
+SETUP_FILES = (".hydra", LOCK_NAME, "multirun.yaml")
+
+
+def remove_if_unused(directory) -> bool:
+    """Remove ``directory`` if it holds only what was written before a run started (Hydra's
+    ``.hydra/``, the lock, log files), and its parent if that is then empty: a plan, a bad
+    config or a failed connection leave no run directory behind (their one line was printed);
+    then the date directory and the output root, if they are empty.
+    Returns whether it was removed."""
+    directory = Path(directory)
+    if not directory.is_dir() or str(directory.resolve()) in _held:
+        return False
+    if any(p.name not in SETUP_FILES and p.suffix != ".log" for p in directory.iterdir()):
+        return False
+    shutil.rmtree(directory, ignore_errors=True)
+    for parent in directory.parents[:2]:         # outputs/<date>/, then outputs/, if now empty
+        try:
+            parent.rmdir()
+        except OSError:
+            break
+    return not directory.exists()
 
 
 @contextmanager

@@ -3,14 +3,14 @@
 A Gaussian pressure bump moves along +x across the 24 taxels; the demo runs the whole
 method (Kalman + RTS, geodesic kernel interpolation, tactile surface, z-buffered frames,
 Farnebäck flow, aggregation), prints the direction of motion it finds in the sensor frame,
-and saves a figure of frames and flow to ``tactile_demo.png``.
+and saves a figure of frames and flow to ``outputs/tactile_demo.png``.
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -18,12 +18,22 @@ from . import aggregate, synthetic
 from .pipeline import TactileConfig, TactileModel, process_view
 
 
+EPILOG = """examples:
+  tactile-demo                          # 10 mm/s along +x; figure outputs/tactile_demo.png
+  tactile-demo --speed 20 --angle 90    # 20 mm/s along +y
+  tactile-demo --figure ''              # print the result only
+
+exit status: 0 done, 2 bad option (one line)."""
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="tactile-demo", description=__doc__.splitlines()[0])
+    from validation.cli import ArgumentParser, help_text
+    parser = ArgumentParser(prog="tactile-demo", description=help_text(__doc__), epilog=EPILOG)
     parser.add_argument("--speed", type=float, default=10.0, help="sliding speed, mm/s (default 10)")
     parser.add_argument("--angle", type=float, default=0.0,
                         help="direction of motion in the pad plane, degrees from +x (default 0)")
-    parser.add_argument("--figure", default="tactile_demo.png", help="output PNG ('' for none)")
+    parser.add_argument("--figure", default="outputs/tactile_demo.png", help="output PNG ('' for none; "
+                        "default outputs/tactile_demo.png)")
     args = parser.parse_args(argv)
 
     t0 = time.perf_counter()
@@ -76,6 +86,7 @@ def _figure(model, activation, result, path):
         ax.set_ylabel("+y (rows)")
     fig.suptitle(f"Tactile frames (bottom view, 8-bit, 0–{model.config.intensity_range[1]:g} kΩ) and dynamic "
                  f"tactile flow (arrows ×{gain:.0f})")
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

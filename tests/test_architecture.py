@@ -16,20 +16,20 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: package -> the project packages it may import (docs/architecture.md, "Dependency direction")
 ALLOWED = {
-    "tactile": set(),
-    "hardware": {"tactile"},
-    "runstore": {"hardware", "tactile"},
-    "cliapp": {"runstore", "hardware", "tactile"},
-    "importers": {"cliapp", "runstore", "hardware", "tactile"},
-    "protocols": {"importers", "cliapp", "runstore", "hardware", "tactile"},
-    "analysis": {"cliapp", "runstore", "hardware", "tactile"},
-    "viewer": {"analysis", "cliapp", "runstore", "hardware", "tactile"},
+    "validation": set(),
+    "tactile": {"validation"},
+    "hardware": {"tactile", "validation"},
+    "runstore": {"hardware", "tactile", "validation"},
+    "cliapp": {"runstore", "hardware", "tactile", "validation"},
+    "importers": {"cliapp", "runstore", "hardware", "tactile", "validation"},
+    "protocols": {"importers", "cliapp", "runstore", "hardware", "tactile", "validation"},
+    "analysis": {"cliapp", "runstore", "hardware", "tactile", "validation"},
+    "viewer": {"analysis", "cliapp", "runstore", "hardware", "tactile", "validation"},
 }
-#: modules that stand beside the simulator and must not import it, with the one import each
-#: may still make until the typed configuration layer (issue 14, item 3) leaves hardware/sim
-BESIDE_THE_SIMULATOR = {"hardware.lab": {"hardware.sim.config"}, "hardware.surfaces": {"hardware.sim.config"},
-                        "hardware.lab_container": set(), "hardware.transforms": set(),
-                        "protocols.plan": set(), "protocols.engine": set(), "protocols.recorder": set()}
+#: modules that stand beside the simulator and must not import it
+BESIDE_THE_SIMULATOR = {m: set() for m in ("hardware.lab", "hardware.surfaces", "hardware.config",
+                                           "hardware.lab_container", "hardware.transforms", "protocols.plan",
+                                           "protocols.engine", "protocols.recorder")}
 #: kept only so that old imports keep working (they re-export what moved)
 RE_EXPORTS = {"protocols.store"}
 

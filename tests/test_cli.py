@@ -178,7 +178,8 @@ def test_resumed_sweep_skips_successes_reruns_the_rest_and_refuses_a_changed_con
 
 
 def test_runs_started_in_the_same_second_get_distinct_directories(tmp_path):
-    cmd = [sys.executable, "-c", "from protocols.cli import main; main()", "plan_only=true"]
+    cmd = [sys.executable, "-c", "from protocols.cli import main; main()", "analyze=false", "progress=false",
+           "protocol.steps=[{wait: {duration: 0.05}}]"]             # a run: a plan alone leaves no directory
     procs = [subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
              for _ in range(3)]
     assert all(p.wait(timeout=120) == 0 for p in procs)

@@ -166,3 +166,42 @@ def test_every_time_axis_of_an_emulated_run_is_strictly_increasing(emulated_lab,
             steps = np.diff(t)
             assert len(t) > 10 and np.all(steps > 0), (f"{group}/{axis}: {int(np.sum(steps <= 0))} of {len(t)} "
                                                         f"steps not increasing, worst {steps.min():.4g} s")
+
+
+@pytest.mark.slow
+def test_a_rehearsal_on_tactile_emulate_presses_finds_segments_and_leaves_no_links(tmp_path):
+    """``tactile-emulate`` then the command it prints: the emulated BioTacs press on the board
+    following the emulated arm, so the rehearsal's analysis finds the crossings; stopped, the
+    emulated lab removes its links."""
+    import json
+    import shlex
+    import signal
+    import subprocess
+    import sys
+
+    links = tmp_path / "links"
+    emu = subprocess.Popen([sys.executable, "-c", "import sys; from hardware.emulators.cli import main; "
+                            "sys.exit(main())", "--host", free_loopback(), "--rosbridge-port", "0",
+                            "--link-dir", str(links)], stdout=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        command = None
+        for line in emu.stdout:
+            if line.startswith("In another terminal:"):
+                command = line.split(":", 1)[1].strip()
+                break
+        assert command is not None and (links / "biotac").is_symlink()
+        words = shlex.split(command)
+        env = {**os.environ, **dict(w.split("=", 1) for w in words if w.startswith("TACTILE_EMULATE_DIR="))}
+        args = [w for w in words if not w.startswith("TACTILE_EMULATE_DIR=")][1:]
+        run = subprocess.run([sys.executable, "-c", "from protocols.cli import main; main()", *args,
+                              "progress=false", "analysis.progress=false", "analysis.figures=false",
+                              "analysis.views=[bottom]"],
+                             cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+        assert run.returncode == 0, run.stderr
+        (summary,) = (tmp_path / "outputs").glob("*/*/summary.json")
+        labels = [s["label"] for s in json.loads(summary.read_text())["segments"]]
+        assert labels.count("during") == 3, labels                # every straw crossed, as in simulation
+    finally:
+        emu.send_signal(signal.SIGTERM)
+        assert emu.wait(timeout=60) == 0
+    assert not links.exists()                                      # links and pose file removed

@@ -10,7 +10,6 @@ Every emulator runs as a separate process (:class:`hardware.emulators.process.Em
 
 from __future__ import annotations
 
-import argparse
 import os
 import signal
 import sys
@@ -19,15 +18,30 @@ from pathlib import Path
 
 HOME_POSE = (0.3, 0.0, 0.2, 3.141592653589793, 0.0, 0.0)    # hardware.arm.home_pose of conf/hardware/lab.yaml
 DEFAULT_LINK_DIR = os.environ.get("TACTILE_EMULATE_DIR", "/tmp/tactile-emulate")
+POSE_FILE = "tcp_pose"          # the arm emulator's TCP pose, read by the BioTac emulators (touch.py)
 
 
-def _ur_emulator(host: str, home_pose):
+def _ur_emulator(host: str, home_pose, pose_file: str | None = None):
     """The UR controller emulator process (hardware/emulators/ur_controller.py), if present."""
     try:
         from .ur_controller import URControllerProcess
     except ImportError:
         return None
-    return URControllerProcess(host, initial_pose=tuple(home_pose))
+    return URControllerProcess(host, initial_pose=tuple(home_pose), pose_file=pose_file)
+
+
+def remove_links(link_dir) -> None:
+    """Remove what the emulated lab left in ``link_dir`` (its pty links and the pose file),
+    and the directory if that leaves it empty."""
+    d = Path(link_dir)
+    for name in ("biotac", "pump", "scale", POSE_FILE):
+        p = d / name
+        if p.is_symlink() or p.is_file():
+            p.unlink()
+    try:
+        d.rmdir()
+    except OSError:
+        pass
 
 
 def _interrupt(signum, frame):
@@ -39,35 +53,57 @@ def _alive(emulator) -> bool:
     return proc is None or proc.poll() is None
 
 
+EPILOG = """exit status: 0 stopped by Ctrl-C or SIGTERM, 1 an emulator exited or could not start,
+2 bad option (one line)."""
+
+
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="tactile-emulate", description=__doc__.split("\n")[0])
+    from validation.cli import ArgumentParser
+    parser = ArgumentParser(prog="tactile-emulate", description=__doc__.replace("``", "").split("\n\nEvery")[0],
+                            epilog=EPILOG)
     parser.add_argument("--host", default="127.0.0.1", help="loopback address for the UR controller emulator")
-    parser.add_argument("--rosbridge-port", type=int, default=9090)
+    parser.add_argument("--rosbridge-port", type=int, default=9090, help="rosbridge websocket port (default 9090)")
     parser.add_argument("--link-dir", default=DEFAULT_LINK_DIR,
                         help="directory of stable symlinks to the ptys (biotac, pump, scale)")
     parser.add_argument("--no-ur", action="store_true", help="do not start the UR controller emulator")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="seed of the emulated sensors' noise (default 0)")
+    parser.add_argument("--surface", default="straws",
+                        help="the board the emulated BioTacs press on, following the emulated arm "
+                             "(conf/surface/NAME.yaml; the protocol's surface; 'none': resting counts only)")
     args = parser.parse_args(argv)
+    surfaces = sorted(p.stem for p in (Path(__file__).resolve().parents[2] / "conf" / "surface").glob("*.yaml"))
+    if args.surface != "none" and args.surface not in surfaces:
+        parser.error(f"--surface {args.surface}: expected one of {', '.join(surfaces)} or none")
 
     from .rosbridge_server import RosbridgeEmulator
     from .serial_devices import SerialDevicesEmulator
 
     started = []
+    pose_file = None
+    if args.surface != "none" and not args.no_ur:
+        from .touch import PoseFile
+        pose_file = str(Path(args.link_dir) / POSE_FILE)
+        PoseFile(pose_file, create=True).close()
     try:
-        ur = None if args.no_ur else _ur_emulator(args.host, HOME_POSE)
+        ur = None if args.no_ur else _ur_emulator(args.host, HOME_POSE, pose_file)
         if ur is not None:
             started.append(ur.start())
             print(f"UR controller   {args.host}  (RTDE 30004, dashboard 29999, script 30003)")
         elif not args.no_ur:
             print("UR controller   not available (hardware/emulators/ur_controller.py missing)")
-        ros = RosbridgeEmulator(host="127.0.0.1", port=args.rosbridge_port, seed=args.seed).start()
+        ros = RosbridgeEmulator(host="127.0.0.1", port=args.rosbridge_port, seed=args.seed, pose_file=pose_file,
+                                surface=args.surface).start()
         started.append(ros)
         print(f"rosbridge       {ros.url}  (/rh/tactile at 100 Hz, /joint_states, "
               f"/rh_trajectory_controller/command)")
-        serial = SerialDevicesEmulator(link_dir=args.link_dir, seed=args.seed).start()
+        serial = SerialDevicesEmulator(link_dir=args.link_dir, seed=args.seed, pose_file=pose_file,
+                                       surface=args.surface).start()
         started.append(serial)
         for name in ("biotac", "pump", "scale"):
             print(f"{name:<15} {Path(args.link_dir) / name} -> {serial.ports[name]}")
+        print(f"board           {args.surface}" + ("  (no contact: the BioTacs rest)" if pose_file is None else
+                                                   "  (the BioTacs press on it following the arm: run protocols "
+                                                   f"with surface={args.surface})"))
         env = "" if args.link_dir == "/tmp/tactile-emulate" else f"TACTILE_EMULATE_DIR={args.link_dir} "
         print(f"\nIn another terminal:  {env}tactile-run hardware=lab_emulated"
               + ("" if args.rosbridge_port == 9090 else f" hardware.rosbridge.url={ros.url}")
@@ -86,6 +122,7 @@ def main(argv=None) -> int:
                 e.stop()
             except Exception as exc:  # stop every emulator even if one fails to stop
                 print(f"warning: stopping {type(e).__name__}: {exc}", file=sys.stderr)
+        remove_links(args.link_dir)
 
 
 if __name__ == "__main__":

@@ -75,21 +75,26 @@ class HandModel:
 
 
 class BiotacSource:
-    """BiotacAll messages with resting counts (the simulator's calibrated sensor model)."""
+    """BiotacAll messages from the simulator's calibrated sensor model: resting counts, or
+    pressed by the emulated arm when ``touch`` (:class:`~.touch.EmulatedTouch`) is given."""
 
-    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0):
-        from ..sim.config import SensorModelConfig
+    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None):
+        from ..config import SensorModelConfig
         from ..sim.sensor import BiotacModel, SensorInputs
 
         self.connected = [f for f in FINGERS if f not in unconnected]
         F = len(self.connected)
         self.model = BiotacModel(self.connected, SensorModelConfig(), np.random.default_rng(seed), 1.0 / rate_hz)
         self.inputs = SensorInputs(np.zeros((F, 24)), np.zeros(F), np.zeros(F), np.zeros(F))
+        self.touch = touch
         self.seq = 0
         self.t0 = time.monotonic()
 
     def message(self, wall: float) -> dict:
-        e, pdc, tdc, tac, pac = self.model.frame(time.monotonic() - self.t0, self.inputs)
+        t = time.monotonic() - self.t0
+        if self.touch is not None:
+            self.inputs = self.touch.inputs(t)
+        e, pdc, tdc, tac, pac = self.model.frame(t, self.inputs)
         self.seq += 1
         tactiles = []
         for f in FINGERS:
@@ -106,10 +111,10 @@ class BiotacSource:
 class Bridge:
     """Server state: clients and their subscriptions, the hand, the BioTacs, counters."""
 
-    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0):
+    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None):
         self.clients: set = set()
         self.hand = HandModel()
-        self.biotacs = BiotacSource(unconnected, seed, rate_hz)
+        self.biotacs = BiotacSource(unconnected, seed, rate_hz, touch)
         self.rate_hz = rate_hz
         self.paused = False
         self.published = {"/rh/tactile": 0, "/joint_states": 0}
@@ -233,10 +238,12 @@ class RosbridgeEmulator(EmulatorProcess):
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, seed: int = 0, unconnected=(),
-                 rate_hz: float = 100.0):
+                 rate_hz: float = 100.0, pose_file: str | None = None, surface: str = "straws"):
         args = ["--host", host, "--port", port, "--seed", seed, "--rate", rate_hz]
         if unconnected:
             args += ["--unconnected", ",".join(unconnected)]
+        if pose_file:
+            args += ["--pose-file", pose_file, "--surface", surface]
         super().__init__("hardware.emulators.rosbridge_server", args)
 
     @property
@@ -258,11 +265,17 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--rate", type=float, default=100.0, help="BiotacAll and JointState rate (Hz)")
     p.add_argument("--unconnected", default="", help="fingers without a sensor, e.g. rf,lf")
+    p.add_argument("--pose-file", default=None, help="press the BioTacs following this TCP pose (touch.py)")
+    p.add_argument("--surface", default="straws", help="the board pressed on (conf/surface/NAME.yaml)")
     a = p.parse_args(argv)
     unconnected = [f for f in a.unconnected.split(",") if f]
     if any(f not in FINGERS for f in unconnected):
         p.error(f"--unconnected: expected names of {FINGERS}, got {unconnected}")
-    bridge = Bridge(unconnected, a.seed, a.rate)
+    touch = None
+    if a.pose_file:
+        from .touch import EmulatedTouch
+        touch = EmulatedTouch(a.pose_file, a.surface, [f for f in FINGERS if f not in unconnected])
+    bridge = Bridge(unconnected, a.seed, a.rate, touch)
     try:
         asyncio.run(serve(a.host, a.port, bridge))
     except OSError as exc:

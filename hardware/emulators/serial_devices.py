@@ -105,10 +105,11 @@ class _Periodic(threading.Thread):
 
 # ============================================================================ BioTac bridge
 class BiotacBridge:
-    """Sends resting BioTac frames (sim sensor model) at ``rate_hz`` with injectable faults."""
+    """Sends BioTac frames (sim sensor model) at ``rate_hz`` with injectable faults: resting,
+    or pressed by the emulated arm when ``touch`` (:class:`~.touch.EmulatedTouch`) is given."""
 
-    def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0):
-        from ..sim.config import SensorModelConfig
+    def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0, touch=None):
+        from ..config import SensorModelConfig
         from ..sim.sensor import BiotacModel, SensorInputs
 
         self.pty = Pty("biotac")
@@ -118,6 +119,7 @@ class BiotacBridge:
         self.model = BiotacModel(self.fingers, SensorModelConfig(), self.rng, 1.0 / rate_hz)
         F = len(self.fingers)
         self.inputs = SensorInputs(np.zeros((F, 24)), np.zeros(F), np.zeros(F), np.zeros(F))
+        self.touch = touch
         self.t0 = time.monotonic()
         self.seq = 0
         self.lock = threading.Lock()
@@ -134,6 +136,8 @@ class BiotacBridge:
         if self.pty.closed:
             return
         t = time.monotonic() - self.t0
+        if self.touch is not None:
+            self.inputs = self.touch.inputs(t)
         e, pdc, tdc, tac, pac = self.model.frame(t, self.inputs)
         self.seq += 1
         frame = encode_frame(self.seq, int(t * 1e6), self.fingers, e, pdc, tdc, tac, pac)
@@ -288,8 +292,8 @@ class SerialLab:
     """The three devices of one emulator process."""
 
     def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0,
-                 pump_max_rate_ml_min: float = 150.0, reservoir_g: float = 1500.0):
-        self.biotac = BiotacBridge(fingers, rate_hz, seed)
+                 pump_max_rate_ml_min: float = 150.0, reservoir_g: float = 1500.0, touch=None):
+        self.biotac = BiotacBridge(fingers, rate_hz, seed, touch)
         self.pump_state = EmulatedPump(pump_max_rate_ml_min)
         self.pump = PumpDevice(self.pump_state)
         self.scale = ScaleDevice(self.pump_state, reservoir_g, seed=seed)
@@ -347,11 +351,13 @@ class SerialDevicesEmulator(EmulatorProcess):
     """
 
     def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0, link_dir: str | None = None,
-                 pump_max_rate_ml_min: float = 150.0):
+                 pump_max_rate_ml_min: float = 150.0, pose_file: str | None = None, surface: str = "straws"):
         args = ["--fingers", ",".join(fingers), "--rate", rate_hz, "--seed", seed,
                 "--pump-max-rate", pump_max_rate_ml_min]
         if link_dir:
             args += ["--link-dir", link_dir]
+        if pose_file:
+            args += ["--pose-file", pose_file, "--surface", surface]
         super().__init__("hardware.emulators.serial_devices", args)
 
     @property
@@ -373,12 +379,18 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--pump-max-rate", type=float, default=150.0, help="ml/min")
     p.add_argument("--link-dir", default=None)
+    p.add_argument("--pose-file", default=None, help="press the BioTacs following this TCP pose (touch.py)")
+    p.add_argument("--surface", default="straws", help="the board pressed on (conf/surface/NAME.yaml)")
     a = p.parse_args(argv)
     fingers = [f for f in a.fingers.split(",") if f]
     bad = [f for f in fingers if f not in FINGERS]
     if bad:
         p.error(f"--fingers: unknown {bad}; expected names of {FINGERS}")
-    lab = SerialLab(fingers, a.rate, a.seed, a.pump_max_rate)
+    touch = None
+    if a.pose_file:
+        from .touch import EmulatedTouch
+        touch = EmulatedTouch(a.pose_file, a.surface, fingers)
+    lab = SerialLab(fingers, a.rate, a.seed, a.pump_max_rate, touch=touch)
     if a.link_dir:
         link_ports(lab.ports(), a.link_dir)
     lab.start()

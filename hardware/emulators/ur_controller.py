@@ -73,6 +73,8 @@ class URControllerConfig:
         protective_stop_at_s: protective stop this long after start (s); None: never.
         unlock_delay_s: the dashboard refuses to unlock a protective stop earlier (5 s on a UR).
         serial_number: answered by ``get serial number`` (e-series).
+        pose_file: publish the TCP pose here every period (:class:`~.touch.PoseFile`), for the
+            BioTac emulators to press with it; None: not published.
     """
 
     host: str = "127.0.0.1"
@@ -90,6 +92,7 @@ class URControllerConfig:
     dashboard_port: int = DASHBOARD_PORT
     script_port: int = SCRIPT_PORT
     log: bool = False
+    pose_file: str | None = None
 
 
 # ============================================================================ controller
@@ -112,6 +115,7 @@ class URControllerEmulator(RtdeServer, DashboardServer):
         self.protective_stop_time = None
         self.protective_stop_reason = ""
         self.ticks = 0
+        self._pose_file = None                  # opened on the first tick (cfg.pose_file)
         self._owners: dict[str, RtdeSession] = {}
         self._sessions: list[RtdeSession] = []
         self._sockets: set[socket.socket] = set()
@@ -314,6 +318,11 @@ class URControllerEmulator(RtdeServer, DashboardServer):
             if self.script is script and not script.keep_running:
                 self.script = None
         self.kin.step(self.dt)
+        if c.pose_file is not None:
+            if self._pose_file is None:
+                from .touch import PoseFile
+                self._pose_file = PoseFile(c.pose_file, create=True)
+            self._pose_file.write(self.controller_time(), self.kin.pose, self.kin.velocity)
         if c.force_limit_n is not None and not self.protective_stopped:
             f = float(np.linalg.norm(self.kin.contact.wrench(self.kin.pose)[:3]))
             if f > c.force_limit_n:
@@ -417,11 +426,13 @@ def main(argv=None) -> int:
     p.add_argument("--protective-stop-at-s", type=float, default=None)
     p.add_argument("--unlock-delay-s", type=float, default=5.0)
     p.add_argument("--log", action="store_true", help="log commands and faults to stderr")
+    p.add_argument("--pose-file", default=None, help="publish the TCP pose here (hardware/emulators/touch.py)")
     a = p.parse_args(argv)
     opts = dict(model=a.model, controller_version=a.controller_version,
                 frequency_hz=a.frequency_hz or (500.0 if a.controller_version[0] >= 5 else 125.0),
                 surface_z=a.surface_z, stiffness_n_m=a.stiffness_n_m, force_limit_n=a.force_limit_n,
-                protective_stop_at_s=a.protective_stop_at_s, unlock_delay_s=a.unlock_delay_s, log=a.log)
+                protective_stop_at_s=a.protective_stop_at_s, unlock_delay_s=a.unlock_delay_s, log=a.log,
+                pose_file=a.pose_file)
     if a.initial_pose:
         opts["initial_pose"] = a.initial_pose
     try:

@@ -270,7 +270,22 @@ class SimWorld:
             self.truth.update_pour(self.grasp.times)
         if self.stage is not None:
             self.stage.step(t, dt)
-        # fingertip contacts
+        self._fingertips(t, dt, N)
+        self._wrench = self._compute_wrench(self.arm_now[0])
+        total = sum(self.contacts[f].force for f in self.fingers)
+        if total > self.cfg.arm.max_contact_force_n:
+            self.protective_stop(t, f"contact force {total:.1f} N above hardware.arm.max_contact_force_n")
+
+    def touch(self, t: float, pose, velocity) -> None:
+        """The fingertip contacts (:attr:`contacts`) for the TCP at ``pose`` ``[x, y, z, rx, ry,
+        rz]`` (m, rad) moving at ``velocity`` (3,) m/s at time ``t`` (s), without advancing the
+        world: what the emulated lab's BioTacs feel following the emulated arm
+        (:mod:`hardware.emulators.touch`)."""
+        pose = np.asarray(pose, float)
+        self.arm_now = (pose[:3], rotvec_to_matrix(pose[3:]), np.r_[np.asarray(velocity, float)[:3], 0.0, 0.0, 0.0])
+        self._fingertips(t, self.frame_dt, 0.0)
+
+    def _fingertips(self, t: float, dt: float, N: float) -> None:
         p, R, v = self.arm_now
         for f in self.fingers:
             T = self.T_tcp_sensor[f]
@@ -285,10 +300,6 @@ class SimWorld:
             self.force_rate[f] = (c.force - self._prev_force[f] + min(d_shear, 0.0)) / dt
             self._prev_force[f] = c.force
             self._prev_shear[f] = c.shear
-        self._wrench = self._compute_wrench(p)
-        total = sum(self.contacts[f].force for f in self.fingers)
-        if total > self.cfg.arm.max_contact_force_n:
-            self.protective_stop(t, f"contact force {total:.1f} N above hardware.arm.max_contact_force_n")
 
     def _surface_contact(self, t, finger, ps, Rs, v_world) -> FingerContact:
         tip, cc, sc = self.tip, self.cfg.contact, self.cfg.sensor
