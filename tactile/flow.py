@@ -15,10 +15,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 METHODS = ("farneback", "dis", "tvl1")
+DIS_PRESETS = {"ultrafast": 0, "fast": 1, "medium": 2}
+"""OpenCV's DIS presets by name (``cv2.DISOPTICAL_FLOW_PRESET_*``); speed and accuracy of each
+on the simulated protocols in ``docs/performance.md``."""
 
 
 @dataclass(frozen=True)
@@ -26,7 +28,8 @@ class FlowConfig:
     """Dense flow method and its parameters (names as OpenCV's).
 
     ``farneback``: pyr_scale, levels, winsize, iterations, poly_n, poly_sigma, flags.
-    ``dis``: preset (0 ultrafast, 1 fast, 2 medium), plus optional overrides in ``dis``.
+    ``dis``: ``dis_preset`` (``ultrafast``, ``fast`` or ``medium``; OpenCV's 0, 1, 2 also
+    accepted), plus optional overrides in ``dis``.
     ``tvl1``: keyword arguments of ``cv2.optflow.DualTVL1OpticalFlow_create``.
     """
 
@@ -38,13 +41,15 @@ class FlowConfig:
     poly_n: int = 5
     poly_sigma: float = 1.2
     flags: int = 0
-    dis_preset: int = 2
+    dis_preset: str | int = "medium"
     dis: dict = field(default_factory=dict)
     tvl1: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if self.method not in METHODS:
             raise ValueError(f"flow.method: expected one of {', '.join(METHODS)}, got {self.method!r}")
+        if self.dis_preset not in DIS_PRESETS and self.dis_preset not in DIS_PRESETS.values():
+            raise ValueError(f"flow.dis_preset: expected one of {', '.join(DIS_PRESETS)}, got {self.dis_preset!r}")
         if not 0 < self.pyr_scale < 1:
             raise ValueError(f"flow.pyr_scale: expected a value in (0, 1), got {self.pyr_scale!r}")
         for name in ("levels", "winsize", "iterations", "poly_n"):
@@ -59,10 +64,12 @@ class FlowEstimator:
     """
 
     def __init__(self, config: FlowConfig = FlowConfig()):
+        import cv2
         self.config = config
         self._algo = None
+        self._farneback = cv2.calcOpticalFlowFarneback
         if config.method == "dis":
-            self._algo = cv2.DISOpticalFlow_create(config.dis_preset)
+            self._algo = cv2.DISOpticalFlow_create(DIS_PRESETS.get(config.dis_preset, config.dis_preset))
             for key, value in config.dis.items():
                 getattr(self._algo, "set" + key[0].upper() + key[1:])(value)
         elif config.method == "tvl1":
@@ -72,7 +79,7 @@ class FlowEstimator:
         """Flow (H, W, 2) float32 in pixels that carries ``prev`` (H, W uint8) onto ``nxt``."""
         c = self.config
         if self._algo is None:
-            return cv2.calcOpticalFlowFarneback(prev, nxt, None, c.pyr_scale, c.levels, c.winsize,
+            return self._farneback(prev, nxt, None, c.pyr_scale, c.levels, c.winsize,
                                                 c.iterations, c.poly_n, c.poly_sigma, c.flags)
         return self._algo.calc(prev, nxt, None)
 

@@ -15,8 +15,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import aggregate, flow, frames, geometry, signals, surface
+from . import flow
 from ._checks import finite_array
+from ._lazy import lazy_import
+
+# numba kernels and SciPy load on first use: the configs above import in milliseconds
+aggregate, frames, geometry = (lazy_import(f"tactile.{m}") for m in ("aggregate", "frames", "geometry"))
+signals, surface = lazy_import("tactile.signals"), lazy_import("tactile.surface")
 
 
 @dataclass(frozen=True)
