@@ -21,7 +21,7 @@ from . import labels as lab
 from . import segments as seg
 from . import slip as slp
 from .load import RunData
-from .preprocess import Prepared, prepare
+from .preprocess import PreparedRun, prepare
 
 _MODELS: dict = {}
 EDGE_REACH_S = 0.2
@@ -42,7 +42,7 @@ class Analysis:
     """Everything computed for one run (see :mod:`analysis.results` for the stored layout)."""
 
     run: RunData
-    prepared: Prepared
+    prepared: PreparedRun
     scheme: str
     contacts: dict                       # finger → [(start, stop)]
     thresholds: dict                     # finger → pressure threshold
@@ -60,7 +60,7 @@ class Analysis:
     timing: dict = field(default_factory=dict)
 
 
-def contact_method(prepared: Prepared, cfg) -> str:
+def contact_method(prepared: PreparedRun, cfg) -> str:
     """``analysis.contact.method`` resolved: ``auto`` is the pressure after a tare, the electrode
     pattern otherwise (no rest stretch to measure a pressure's noise on, or none at all)."""
     if cfg.contact.method != "auto":
@@ -78,7 +78,7 @@ def static_views(cfg, scheme: str) -> tuple[str, ...]:
     return ()
 
 
-def _threshold(prepared: Prepared, k: int, cfg) -> float:
+def _threshold(prepared: PreparedRun, k: int, cfg) -> float:
     s = cfg.segmentation
     floor = s.contact_min_pdc if prepared.pressure_name == "pdc" else s.contact_min_proxy
     if prepared.baseline.kind != "tare":

@@ -102,7 +102,7 @@ class TactileModel:
         if unknown:
             raise ValueError(f"views: unknown view(s) {unknown}; expected names from {sorted(known)}")
         margin = max(config.scale * config.intensity_range[1], 0.0) + 0.5
-        plans = {name: frames.make_plan(mesh, known[name], size=config.size, margin=margin)
+        plans = {name: frames.make_frame_plan(mesh, known[name], size=config.size, margin=margin)
                  for name in config.views}
         operators = {name: (frames.linear_operator(plan, mesh) @ weights).astype(np.float32)
                      for name, plan in plans.items()}
