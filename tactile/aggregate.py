@@ -16,6 +16,9 @@ from scipy import ndimage
 
 from ._checks import finite_array
 
+__all__ = ["FlowAggregates", "aggregate_flow", "aggregation_constants", "centre_of_pressure",
+           "flow_functionals", "window"]
+
 
 @dataclass(frozen=True)
 class FlowAggregates:
@@ -38,7 +41,7 @@ class FlowAggregates:
     confidence: np.ndarray
 
 
-def aggregate_flow(flow, mask, noise: float = 0.05) -> FlowAggregates:
+def aggregate_flow(flow, mask, *, noise: float = 0.05) -> FlowAggregates:
     """Summarise a flow field (T, H, W, 2) over the footprint ``mask`` (H, W) bool.
 
     ``noise``: magnitude (flow units) below which a pixel counts as not moving, for

@@ -17,6 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+__all__ = ["DIS_PRESETS", "METHODS", "FlowConfig", "FlowEstimator", "contact_reference", "dynamic_flow",
+           "loaded_reference", "static_flow", "to_mm", "to_mm_per_s"]
+
 METHODS = ("farneback", "dis", "tvl1")
 DIS_PRESETS = {"ultrafast": 0, "fast": 1, "medium": 2}
 """OpenCV's DIS presets by name (``cv2.DISOPTICAL_FLOW_PRESET_*``); speed and accuracy of each
@@ -94,8 +97,15 @@ def _check_frames(frames) -> np.ndarray:
     return frames
 
 
-def dynamic_flow(frames, config: FlowConfig = FlowConfig()) -> np.ndarray:
-    """Flow between consecutive frames: (T, H, W) uint8 → (T, H, W, 2) px/frame, flow[0] = 0."""
+def dynamic_flow(frames, *, config: FlowConfig = FlowConfig()) -> np.ndarray:
+    """Flow between consecutive frames: (T, H, W) uint8 → (T, H, W, 2) px/frame, flow[0] = 0.
+
+    >>> import numpy as np
+    >>> frames = np.zeros((2, 32, 32), np.uint8); frames[0, 12:20, 10:18] = frames[1, 12:20, 11:19] = 200
+    >>> f = dynamic_flow(frames)
+    >>> f.shape, bool(f[1, 14:18, 12:16, 0].mean() > 0.3)            # the square moved right
+    ((2, 32, 32, 2), True)
+    """
     frames = _check_frames(frames)
     estimate = FlowEstimator(config)
     out = np.zeros(frames.shape + (2,), np.float32)
@@ -104,7 +114,7 @@ def dynamic_flow(frames, config: FlowConfig = FlowConfig()) -> np.ndarray:
     return out
 
 
-def static_flow(frames, reference, config: FlowConfig = FlowConfig()) -> np.ndarray:
+def static_flow(frames, reference, *, config: FlowConfig = FlowConfig()) -> np.ndarray:
     """Flow from a reference frame to every frame: → (T, H, W, 2) px.
 
     ``reference``: an index into ``frames`` or an (H, W) uint8 frame (e.g. the unloaded one).
@@ -163,11 +173,15 @@ def loaded_reference(load, start: int, fraction: float = 0.8) -> int:
     return start + int(hits[0]) if hits.size else start
 
 
-def to_mm_per_s(flow_px, mm_per_px: float, rate_hz: float) -> np.ndarray:
-    """Dynamic flow px/frame → mm/s on the view plane."""
+def to_mm_per_s(flow_px, *, mm_per_px: float, rate_hz: float) -> np.ndarray:
+    """Dynamic flow px/frame → mm/s on the view plane.
+
+    >>> float(to_mm_per_s(0.5, mm_per_px=0.74, rate_hz=100.0))
+    37.0
+    """
     return np.asarray(flow_px) * np.float32(mm_per_px * rate_hz)
 
 
-def to_mm(flow_px, mm_per_px: float) -> np.ndarray:
+def to_mm(flow_px, *, mm_per_px: float) -> np.ndarray:
     """Static flow px → mm on the view plane."""
     return np.asarray(flow_px) * np.float32(mm_per_px)

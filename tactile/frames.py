@@ -49,6 +49,10 @@ from ._checks import finite_array, positive
 from ._lazy import lazy_import
 from .surface import SurfaceMesh
 
+__all__ = ["DEFAULT_VIEWS", "FramePlan", "View", "WalkIndex", "frame_cache", "frame_geometry",
+           "frame_scratch", "linear_operator", "make_frame_plan", "render", "render_activation", "to_uint8",
+           "view_axes"]
+
 _k = lazy_import("tactile._frame_kernels")   # numba: compiled on first use
 
 MIN_FRAME_PIXELS = 8

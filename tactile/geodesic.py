@@ -91,7 +91,7 @@ def _paper_distances(ax: np.ndarray, pa: np.ndarray, pb: np.ndarray, n_steps: in
     return total
 
 
-def geodesic_distances(axes, points_a, points_b, method: str = "accurate", *,
+def geodesic_distances(axes, points_a, points_b, *, method: str = "accurate",
                        n_steps: int = 100) -> np.ndarray:
     """Geodesic distances (len(a), len(b)) in mm between points on an ellipsoid.
 
@@ -100,6 +100,12 @@ def geodesic_distances(axes, points_a, points_b, method: str = "accurate", *,
     :data:`SURFACE_TOL`). method: ``"accurate"`` (shortest geodesic, ~1e-9 relative
     typical) or ``"paper"`` (the method's (theta, phi)-straight path, ``n_steps`` chords;
     ``n_steps`` is ignored by ``"accurate"``). See the module docstring for both.
+
+    >>> import numpy as np
+    >>> axes = np.array([12.0, 7.8, 7.0])
+    >>> pole, rim = [0.0, 0.0, -7.0], [12.0, 0.0, 0.0]      # a quarter of the x-z ellipse
+    >>> float(geodesic_distances(axes, pole, rim).round(3)[0, 0])
+    15.182
     """
     ax = _check_axes(axes)
     if method not in GEODESIC_METHODS:

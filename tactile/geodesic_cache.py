@@ -69,7 +69,7 @@ def _write_cache(path: Path, dist: np.ndarray) -> None:
         raise
 
 
-def cached_geodesic_distances(axes, points_a, points_b, method: str = "accurate",
+def cached_geodesic_distances(axes, points_a, points_b, *, method: str = "accurate",
                               cache_dir=None, **kw) -> np.ndarray:
     """:func:`geodesic_distances`, computed once and cached on disk.
 
@@ -93,7 +93,7 @@ def cached_geodesic_distances(axes, points_a, points_b, method: str = "accurate"
         except Exception as exc:  # any damage: report and rebuild
             warnings.warn(f"geodesic cache file {path} is unusable ({exc!r}); recomputing",
                           RuntimeWarning, stacklevel=2)
-    dist = geodesic_distances(ax, pa, pb, method, **kw)
+    dist = geodesic_distances(ax, pa, pb, method=method, **kw)
     try:
         _write_cache(path, dist)
     except OSError as exc:  # an unwritable cache must not cost the result

@@ -24,6 +24,9 @@ from .ellipsoid import ellipsoid_normals, ellipsoid_points, project_to_ellipsoid
 from .geodesic import geodesic_distances
 from .geodesic_cache import cached_geodesic_distances
 
+__all__ = ["KERNEL_FORMS", "SurfaceMesh", "build_mesh", "interpolate", "interpolation_weights",
+           "kernel_weights", "tactile_surface"]
+
 KERNEL_FORMS = ("paper", "squared")
 
 
@@ -181,7 +184,7 @@ def tactile_surface(mesh: SurfaceMesh, values, scale: float) -> np.ndarray:
     return mesh.points + float(scale) * values[..., None] * mesh.normals
 
 
-def kernel_weights(distances, sigma, form: str = "paper", normalise: bool = True) -> np.ndarray:
+def kernel_weights(distances, sigma, *, form: str = "paper", normalise: bool = True) -> np.ndarray:
     """Kernel weights of geodesic ``distances`` (..., n_taxels) mm, same shape.
 
     form ``"paper"``: ``exp(-d / (2 sigma^2))``, exactly as the method writes it (d in mm,
@@ -189,6 +192,9 @@ def kernel_weights(distances, sigma, form: str = "paper", normalise: bool = True
     form ``"squared"``: the Gaussian ``exp(-d^2 / (2 sigma^2))``.
     normalise: Nadaraya-Watson weights, each row (last axis) summing to 1; computed with
     the row's largest exponent subtracted, so rows far from every taxel do not underflow.
+
+    >>> kernel_weights([[0.0, 2.0]], 1.0).round(3).tolist()     # the nearer taxel weighs e times more
+    [[0.731, 0.269]]
     """
     d = finite_array("distances", distances, ndim=(1, 2))
     if d.shape[-1] == 0:

@@ -256,7 +256,7 @@ def tactile_tracks(scene: Scene, fingers=None) -> list[TactileTrack]:
             for j, (prev, cur) in enumerate(both):
                 if not np.array_equal(prev, cur):
                     field[j] = estimate(prev, cur)
-            agg = aggregate_flow(field, plan.mask, scene.noise)
+            agg = aggregate_flow(field, plan.mask, noise=scene.noise)
             grid = draw.arrow_grid(plan.mask, ARROW_SPACING)
             out.append(TactileTrack(finger, view, both[:, 1].copy(), draw.sample_field(field, grid), grid,
                                     agg.mean, agg.magnitude, agg.direction, agg.confidence))
