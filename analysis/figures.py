@@ -205,15 +205,22 @@ def _axis(v) -> str:
     return ("+" if v[i] > 0 else "−") + names[i]
 
 
-def _summary_line(a, segments, rows) -> str:
-    """Every segment of a label: its aggregated |flow| and direction in the bottom view."""
-    parts = []
-    for sg in segments:
-        agg = (rows.get(sg.id) or {}).get("flows", {}).get(("bottom", "dynamic"))
-        what = f"s{sg.id}" + (f" f{sg.feature}" if sg.feature >= 0 else "")
-        parts.append(f"{what}: {agg['magnitude']:.2f} mm/s at {np.degrees(agg['direction']) % 360:.0f}°" if agg else
-                     f"{what}: –")
-    return "Bottom view, every segment of the finger (image angle): " + "; ".join(parts)
+def _summary_line(segments, rows) -> str:
+    """Every segment of a label in the bottom view: each one's aggregated |flow| and image
+    direction (up to four), or their range and circular mean (more)."""
+    aggs = [(sg, (rows.get(sg.id) or {}).get("flows", {}).get(("bottom", "dynamic"))) for sg in segments]
+    found = [g for _, g in aggs if g is not None]
+    head = f"Bottom view, the finger's {len(segments)} segment(s) of this label (image angle): "
+    if len(segments) <= 4:
+        return head + "; ".join(
+            f"s{sg.id}" + (f" f{sg.feature}" if sg.feature >= 0 else "") + ": "
+            + (f"{g['magnitude']:.2f} mm/s at {np.degrees(g['direction']) % 360:.0f}°" if g else "–")
+            for sg, g in aggs)
+    if not found:
+        return head + "no flow"
+    mags = [g["magnitude"] for g in found]
+    angle = np.degrees(np.angle(np.mean([np.exp(1j * g["direction"]) for g in found]))) % 360
+    return head + f"|flow| {min(mags):.2f}–{max(mags):.2f} mm/s (median {np.median(mags):.2f}), mean direction {angle:.0f}°"
 
 
 def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
@@ -280,12 +287,13 @@ def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
                 else:
                     title += " (no arrow: below noise)"
             ax.set_title(title, fontsize=8)
-            ax.set_xlabel(f"col → sensor {_axis(plan.cols)} ({plan.mm_per_px:.2f} mm/px)", fontsize=8)
-            ax.set_ylabel(f"row → sensor {_axis(plan.rows)}", fontsize=8)
-            ax.tick_params(labelsize=7)
+            ax.set_xlabel(f"→ sensor {_axis(plan.cols)} ({plan.shape[1] * plan.mm_per_px:.0f} mm wide)", fontsize=8)
+            ax.set_ylabel(f"↓ sensor {_axis(plan.rows)}", fontsize=8)
+            ax.set_xticks([])             # pixel indices tell nothing; the labels say the axes
+            ax.set_yticks([])
         t0, t1 = a.run.time[sg.start], a.run.time[min(sg.stop, len(a.run.time) - 1)]
         fig.text(0.1 / W, (H - top_in - row_in * (r + 1) + 0.12) / H,
-                 f"{sg.finger} segment {sg.id}, {t0:.2f}–{t1:.2f} s. " + _summary_line(a, by_finger[sg.finger], rows),
+                 f"{sg.finger} segment {sg.id}, {t0:.2f}–{t1:.2f} s. " + _summary_line(by_finger[sg.finger], rows),
                  fontsize=7, va="bottom")
     mm_s = biggest * model.plans[views[0]].mm_per_px * rate
     fig.suptitle(f"'{label}' segments: the frame at a segment's middle (grey), the fingertip's outline in each view "
