@@ -92,6 +92,8 @@ class AnalysisConfig:
     slip: Slip = field(default_factory=Slip)
     reference: str = "auto"
     reference_time_s: float | None = None
+    static_flow: str = "auto"                # flow.static: auto (where an estimate reads it) | all
+    workers: int | None = None               # threads of the flow jobs; None: the cores available
     intensity: str = "contact"
     save_fields: bool = False
     figures: bool = True
@@ -103,9 +105,9 @@ class AnalysisConfig:
 _TACTILE_KEYS = {"kalman_r": float, "kalman_q": float, "smooth": bool, "sigma": float, "kernel": str,
                  "geodesic": str, "mesh_spacing": float, "scale": float, "render": str, "size": list,
                  "intensity_range": list, "noise": float, "chunk": int}
-_FLOW_ANALYSIS_KEYS = {"reference", "reference_time_s"}
+_FLOW_ANALYSIS_KEYS = {"reference", "reference_time_s", "static"}
 _FLOW_KEYS = {"method": str, "pyr_scale": float, "levels": int, "winsize": int, "iterations": int,
-              "poly_n": int, "poly_sigma": float, "flags": int, "dis_preset": int, "dis": dict, "tvl1": dict}
+              "poly_n": int, "poly_sigma": float, "flags": int, "dis_preset": str, "dis": dict, "tvl1": dict}
 
 
 def _plain(node) -> dict:
@@ -168,7 +170,7 @@ def load_config(node=None) -> AnalysisConfig:
     raw = _plain(node)
     d = dict(raw)
     known = {"enabled", "tactile", "views", "flow", "baseline", "pressure", "segmentation", "estimates",
-             "pour", "contact", "slip", "save_fields", "figures", "max_segment_figures", "progress"}
+             "pour", "contact", "slip", "save_fields", "figures", "max_segment_figures", "progress", "workers"}
     _refuse_unknown("analysis", d, known)
     tac = dict(d.get("tactile") or {})
     # intensity_range: "contact" (each contact window spans 0..255 up to its own peak), or [low, high] kΩ
@@ -180,6 +182,9 @@ def load_config(node=None) -> AnalysisConfig:
     reference = _typed("flow.reference", fl.pop("reference", "auto"), str)
     if reference not in REFERENCES:
         raise AnalysisConfigError(f"analysis.flow.reference: expected one of {', '.join(REFERENCES)}, got {reference!r}")
+    static_flow = _typed("flow.static", fl.pop("static", "auto"), str)
+    if static_flow not in ("auto", "all"):
+        raise AnalysisConfigError(f"analysis.flow.static: expected auto or all, got {static_flow!r}")
     ref_time = fl.pop("reference_time_s", None)
     if ref_time is not None:
         ref_time = _typed("flow.reference_time_s", ref_time, float)
@@ -199,6 +204,9 @@ def load_config(node=None) -> AnalysisConfig:
     for k in ("kalman_r", "kalman_q", "sigma", "mesh_spacing"):
         if k in tk:
             _positive(f"tactile.{k}", tk[k])
+    if isinstance(fl.get("dis_preset"), int) and not isinstance(fl["dis_preset"], bool):
+        names = {i: n for n, i in tflow.DIS_PRESETS.items()}      # OpenCV's numbers, as before the names
+        fl["dis_preset"] = names.get(fl["dis_preset"], fl["dis_preset"])
     try:
         fk = {k: _typed(f"flow.{k}", v, _FLOW_KEYS[k]) for k, v in fl.items()}
         flow_cfg = tflow.FlowConfig(**fk)
@@ -232,10 +240,16 @@ def load_config(node=None) -> AnalysisConfig:
     slip = _section(Slip, "slip", sl)
     top = {k: _typed(k, d[k], t) for k, t in (("enabled", bool), ("save_fields", bool), ("figures", bool),
                                               ("max_segment_figures", int), ("progress", bool)) if k in d}
+    if d.get("workers") is not None:
+        top["workers"] = _typed("workers", d["workers"], int)
+        if top["workers"] < 1:
+            raise AnalysisConfigError(f"analysis.workers: expected an integer ≥ 1 (or null: the cores available), "
+                                      f"got {top['workers']}")
     return AnalysisConfig(tactile=tactile, views=tuple(views), baseline_fallback_window_s=window,
                           baseline_fallback_contact_min=fb_min,
                           pressure_signal=signal, segmentation=seg, estimates=est, pour=pour, contact=con,
-                          slip=slip, reference=reference, reference_time_s=ref_time, intensity=intensity,
+                          slip=slip, reference=reference, reference_time_s=ref_time, static_flow=static_flow,
+                          intensity=intensity,
                           raw=raw, **top)
 
 

@@ -1,44 +1,61 @@
 """Figures (PNG, matplotlib Agg): what a researcher would put in a paper.
 
 - ``electrodes.png``: raw vs Kalman+RTS smoothed activation of the most active taxels;
-- ``pressure.png``: pressure per finger with its peaks/troughs and coloured segment bands, and
-  markers where the live slip detector fired and the protocol's reactions were issued;
-- ``taxels.png``: every taxel's smoothed activation (kΩ) over time, with the same bands;
-- ``ellipsoid.png``: the interpolated activation on the fitted ellipsoid (3D) at peak pressure;
-- ``flow_<finger>_s<id>_<label>.png``: per segment, one panel per view: the tactile frame at the
-  segment's middle, the mean dynamic flow over the segment (quiver) and an arrow for the
-  aggregated direction.
+- ``pressure.png``: pressure per finger with its coloured segment bands (a sweep also marks the
+  peaks of the features crossed), and markers where the live slip detector fired and the
+  protocol's reactions were issued;
+- ``taxels.png``: every taxel's smoothed activation (kΩ) over time with the segment bands above
+  it, and the curves under the bands;
+- ``ellipsoid.png``: the interpolated activation on the fitted ellipsoid (a shaded surface) at
+  peak pressure, with the taxels on it;
+- ``flow_<label>.png``: one figure per segment label, one row per finger (its middle segment of
+  that label), one panel per view: the tactile frame at the segment's middle, the mean dynamic
+  flow (orange quiver) and the segment's aggregated flow (cyan arrow), both drawn to one scale,
+  the arrow left out below the flow's noise; every segment of the label is summarised in a
+  line under its row.
+
+Figures are built on :class:`matplotlib.figure.Figure` objects (no pyplot state) with fixed
+margins (no ``tight_layout``: it costs a draw per figure); legends sit beside the axes, never
+over the curves.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from tactile import flow as tflow
+from tactile import surface
 
-from tactile import flow as tflow  # noqa: E402
-from tactile import surface  # noqa: E402
+from . import flows as fl
 
-from . import flows as fl  # noqa: E402
-
-COLOURS = {"approach": "#bbbbbb", "before": "#4c72b0", "during": "#dd8452", "after": "#55a868", "lift": "#999999",
+COLOURS = {"approach": "#c7c7c7", "before": "#4c72b0", "during": "#dd8452", "after": "#55a868", "lift": "#7f7f7f",
            "pour": "#4c72b0", "initial_slip": "#c44e52", "rotation": "#8172b3", "downward": "#dd8452",
            "full_slip": "#937860", "held": "#55a868", "contact": "#55a868", "no_contact": "#dddddd", "all": "#ffffff"}
+TAXEL_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
+TAXEL_STYLES = ("-", "--", "-.", ":", (0, (5, 1, 1, 1)))
+NO_FLOW_FIGURE = ("approach", "lift", "no_contact")
+FLOW_PAIRS = 8
+"""Frame pairs whose flow fields are averaged for a panel's quiver (spread over the segment)."""
+LEGEND = dict(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+WIDE = dict(left=0.07, right=0.80)           # time-series figures: the legend in the right margin
 
 
-def _bands(ax, a, finger):
+def _figure(w: float, h: float):
+    from matplotlib.figure import Figure
+    return Figure(figsize=(w, h))
+
+
+def _bands(ax, a, finger, labels: bool = True):
     seen = set()
     for sg in a.segments:
         if sg.finger != finger or sg.label == "all":
             continue
         t0 = a.run.time[sg.start]
         t1 = a.run.time[min(sg.stop, len(a.run.time) - 1)]
-        ax.axvspan(t0, t1, color=COLOURS.get(sg.label, "#eeeeee"), alpha=0.25, lw=0,
-                   label=None if sg.label in seen else sg.label)
+        ax.axvspan(t0, t1, color=COLOURS.get(sg.label, "#eeeeee"), alpha=0.3, lw=0,
+                   label=None if sg.label in seen or not labels else sg.label)
         seen.add(sg.label)
 
 
@@ -48,8 +65,8 @@ def _reactions(ax, a) -> None:
     for kind, style in (("reaction", dict(color="C2", ls="-", lw=2.5, alpha=0.6)),
                         ("slip", dict(color="C3", ls="--", lw=1.2, zorder=5))):
         for i, (t, name, detail) in enumerate(a.run.events.of_kind(kind)):
-            what = (f"live slip detected {t:.2f} s ({name}, {detail.get('cause', '?')})" if kind == "slip"
-                    else f"reactions issued {t:.2f} s")
+            what = (f"live slip\n{t:.2f} s ({name},\n{detail.get('cause', '?')})" if kind == "slip"
+                    else f"reactions\n{t:.2f} s")
             ax.axvline(t, **style, label=what if i == 0 else None)
 
 
@@ -61,133 +78,125 @@ def _main_finger(a) -> tuple[str, int]:
     return a.run.fingers[0], 0
 
 
-def electrodes(a, path: Path) -> None:
+def _rows(n: int, height: float, top_in: float = 0.45, bottom_in: float = 0.55):
+    """A one-column figure of ``n`` panels ``height`` in tall with fixed margins in inches."""
+    fig = _figure(11, n * height + top_in + bottom_in)
+    h = fig.get_figheight()
+    fig.subplots_adjust(top=1 - top_in / h, bottom=bottom_in / h, hspace=0.35, **WIDE)
+    return fig
+
+
+def electrodes(a):
     fingers = list(a.contacts) or [a.run.fingers[0]]
-    fig, axes = plt.subplots(len(fingers), 1, figsize=(11, 3.2 * len(fingers)), squeeze=False, sharex=True)
+    fig = _rows(len(fingers), 2.8)
+    axes = fig.subplots(len(fingers), 1, squeeze=False, sharex=True)[:, 0]
     t = a.run.time
-    for ax, f in zip(axes[:, 0], fingers):
+    for ax, f in zip(axes, fingers):
         k = a.run.fingers.index(f)
         top = np.argsort(-np.abs(a.prepared.activation[:, k]).max(axis=0))[:5]
         for j, tx in enumerate(top):
-            c = f"C{j}"
-            ax.plot(t, a.prepared.raw_activation[:, k, tx], color=c, lw=0.5, alpha=0.45)
-            ax.plot(t, a.prepared.activation[:, k, tx], color=c, lw=1.6, label=f"taxel {tx + 1}")
+            c, ls = TAXEL_COLOURS[j], TAXEL_STYLES[j]
+            ax.plot(t, a.prepared.raw_activation[:, k, tx], color=c, lw=0.5, alpha=0.35)
+            ax.plot(t, a.prepared.activation[:, k, tx], color=c, ls=ls, lw=1.5, label=f"taxel {tx + 1}")
         ax.set_ylabel("activation (kΩ)")
-        ax.set_title(f"{f}: raw (thin) vs Kalman+RTS smoothed (thick) activation, 5 most active taxels")
-        ax.legend(fontsize=8, ncol=5, loc="upper left")
-    axes[-1, 0].set_xlabel("time since run start (s)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+        ax.set_title(f"{f}: raw (thin) vs Kalman+RTS smoothed (thick), the 5 most active taxels", fontsize=10)
+        ax.legend(**LEGEND)
+    axes[-1].set_xlabel("time since run start (s)")
+    return fig
 
 
-def pressure(a, path: Path) -> None:
+def pressure(a):
     fingers = list(a.contacts) or list(a.run.fingers)
-    fig, axes = plt.subplots(len(fingers), 1, figsize=(11, 3.0 * len(fingers)), squeeze=False, sharex=True)
+    fig = _rows(len(fingers), 2.6)
+    axes = fig.subplots(len(fingers), 1, squeeze=False, sharex=True)[:, 0]
     t = a.run.time
-    unit = "PDC counts above rest" if a.prepared.pressure_name == "pdc" else "Σ activation (kΩ, PDC proxy)"
-    for ax, f in zip(axes[:, 0], fingers):
+    unit = "PDC above rest" if a.prepared.pressure_name == "pdc" else "Σ activation (kΩ)"
+    for ax, f in zip(axes, fingers):
         k = a.run.fingers.index(f)
         p = a.prepared.pressure[:, k]
         _bands(ax, a, f)
         ax.plot(t, p, color="k", lw=1, label="pressure")
         ex = a.extrema.get(f)
-        if ex is not None:
+        if ex is not None and a.scheme == "sweep":      # the features crossed; a pour's are its phase bands
             ax.plot(t[ex.peaks], p[ex.peaks], "v", color="C3", label="peaks")
-            ax.plot(t[ex.troughs], p[ex.troughs], "^", color="C0", label="troughs")
         if f in a.thresholds:
-            ax.axhline(a.thresholds[f], color="C7", ls=":", lw=1, label="contact threshold")
+            ax.axhline(a.thresholds[f], color="C7", ls=":", lw=1, label="contact\nthreshold")
         _reactions(ax, a)
         ax.set_ylabel(unit)
-        ax.set_title(f"{f}: pressure, peaks and segments ({a.scheme} labels)")
-        ax.legend(fontsize=8, ncol=4, loc="upper left")
-    axes[-1, 0].set_xlabel("time since run start (s)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+        ax.set_title(f"{f}: pressure and segments ({a.scheme} labels)", fontsize=10)
+        ax.legend(**LEGEND)
+    axes[-1].set_xlabel("time since run start (s)")
+    return fig
 
 
-def taxels(a, path: Path) -> None:
+def taxels(a):
     f, k = _main_finger(a)
     t = a.run.time
-    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(11, 7), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    fig = _figure(11, 6.2)
+    fig.subplots_adjust(top=0.93, bottom=0.09, hspace=0.12, **WIDE)
+    ax, ax2 = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [2, 1]})
     act = a.prepared.activation[:, k]
     im = ax.imshow(act.T, aspect="auto", origin="lower", extent=(t[0], t[-1], 0.5, 24.5), cmap="magma",
                    interpolation="nearest")
-    fig.colorbar(im, ax=[ax, ax2], label="activation (kΩ)", shrink=0.8)
+    for sg in a.segments:                       # the bands as a strip along the heatmap's top
+        if sg.finger == f and sg.label != "all":
+            t1 = t[min(sg.stop, len(t) - 1)]
+            ax.axvspan(t[sg.start], t1, ymin=0.97, ymax=1.0, color=COLOURS.get(sg.label, "#eeeeee"), lw=0)
+    box = ax.get_position()
+    cax = fig.add_axes([box.x1 + 0.01, box.y0, 0.012, box.height])
+    fig.colorbar(im, cax=cax, label="activation (kΩ)")
     ax.set_ylabel("taxel (1..24)")
-    ax.set_title(f"{f}: smoothed taxel activations (impedance above rest)")
+    ax.set_title(f"{f}: smoothed taxel activations (impedance above rest); segments along the top", fontsize=10)
     _bands(ax2, a, f)
     ax2.plot(t, act, lw=0.6)
+    ax2.set_xlim(t[0], t[-1])
     ax2.set_ylabel("activation (kΩ)")
     ax2.set_xlabel("time since run start (s)")
     if ax2.get_legend_handles_labels()[0]:                  # no bands when nothing was segmented
-        ax2.legend(fontsize=8, ncol=6, loc="upper left", title="segments")
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+        ax2.legend(**{**LEGEND, "bbox_to_anchor": (1.09, 1.0)}, title="segments")
+    return fig
 
 
-def ellipsoid(a, model, path: Path) -> None:
+def ellipsoid(a, model):
+    from matplotlib import cm, colors
+    from matplotlib.ticker import MaxNLocator
+    from matplotlib.tri import Triangulation
     f, k = _main_finger(a)
     i = int(np.argmax(a.prepared.proxy[:, k]))
     values = surface.interpolate(a.prepared.activation[i:i + 1, k], model.weights)[0]
-    pts = model.mesh.points
-    fig = plt.figure(figsize=(8, 6))
-    ax = fig.add_subplot(projection="3d")
-    sc = ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], c=values, cmap="magma", s=6)
-    ax.scatter(*model.taxels.T, color="cyan", s=18, marker="o", label="taxels")
-    ax.set_xlabel("x (mm, along finger)")
-    ax.set_ylabel("y (mm, lateral)")
-    ax.set_zlabel("z (mm, pad normal)")
-    ax.set_title(f"{f}: interpolated activation on the ellipsoid at t = {a.run.time[i]:.2f} s (peak)")
+    pts, tris = model.mesh.points, model.mesh.triangles
+    fig = _figure(8.5, 6.0)
+    fig.subplots_adjust(left=0.0, right=0.86, top=0.95, bottom=0.0)
+    ax = fig.add_subplot(projection="3d", computed_zorder=False)   # the taxels drawn over the surface
+    norm = colors.Normalize(vmin=0.0, vmax=max(float(values.max()), 1e-6))
+    surf = ax.plot_trisurf(Triangulation(pts[:, 0], pts[:, 1], tris), pts[:, 2], lw=0, antialiased=False,
+                           shade=True, cmap="magma", norm=norm)
+    surf.set_array(values[tris].mean(axis=1))
+    ax.scatter(*model.taxels.T, color="cyan", edgecolor="k", lw=0.4, s=22, depthshade=False, zorder=3)
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.set_major_locator(MaxNLocator(4))
+    ax.set_xlabel("x (mm, along finger)", labelpad=14)
+    ax.set_ylabel("y (mm, lateral)", labelpad=16)
+    ax.set_zlabel("z (mm, pad normal)", labelpad=14)
+    ax.tick_params(axis="both", pad=2, labelsize=8)
+    ax.set_box_aspect(np.ptp(pts, axis=0), zoom=0.95)
     ax.view_init(elev=-35, azim=-60)
-    fig.colorbar(sc, ax=ax, label="activation (kΩ)", shrink=0.7)
-    ax.legend(loc="upper left")
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    fig.suptitle(f"{f}: activation on the fingertip at t = {a.run.time[i]:.2f} s (its peak);\n"
+                 "cyan: the 24 taxels", fontsize=10)
+    cax = fig.add_axes([0.9, 0.22, 0.02, 0.5])
+    fig.colorbar(cm.ScalarMappable(norm=norm, cmap="magma"), cax=cax, label="activation (kΩ)")
+    return fig
 
 
-def segment_flow(a, model, sg, row, path: Path, cfg) -> bool:
-    cf = fl.find(a.flows, sg.finger, sg.start, sg.stop)
-    if cf is None:
-        return False
-    views = list(cf.views)
-    fig, axes = plt.subplots(1, len(views), figsize=(4.6 * len(views), 4.0), squeeze=False)
-    est = tflow.FlowEstimator(cfg.tactile.flow)
-    s, e = sg.start - cf.window[0], sg.stop - cf.window[0]
-    pairs = np.unique(np.linspace(max(s, 1), e - 1, min(20, max(e - max(s, 1), 1))).astype(int))
-    for ax, v in zip(axes[0], views):
-        vr, plan = cf.views[v], model.plans[v]
-        mid = (s + e - 1) // 2
-        ax.imshow(vr.frames[mid], cmap="gray", vmin=0, vmax=255, origin="upper")
-        mean = np.mean([est(vr.frames[p - 1], vr.frames[p]) for p in pairs], axis=0) if len(pairs) else None
-        if mean is not None:
-            step = 3
-            yy, xx = np.mgrid[0:mean.shape[0]:step, 0:mean.shape[1]:step]
-            m = plan.mask[::step, ::step]
-            u, w = mean[::step, ::step, 0], mean[::step, ::step, 1]
-            ax.quiver(xx[m], yy[m], u[m], w[m], color="C1", angles="xy", scale_units="xy",
-                      scale=max(np.abs(mean).max() / 2.5, 1e-6), width=0.006)
-        agg = (row or {}).get("flows", {}).get((v, "dynamic"))
-        if agg is not None:
-            vec = np.array([np.cos(agg["direction"]), np.sin(agg["direction"])])
-            c0, r0 = plan.shape[1] / 2, plan.shape[0] / 2
-            ax.annotate("", xy=(c0 + 8 * vec[0], r0 + 8 * vec[1]), xytext=(c0, r0),
-                        arrowprops=dict(color="cyan", width=2.5, headwidth=9))
-            ax.set_title(f"{v}: |flow| {agg['magnitude']:.2f} mm/s, conf {agg['confidence']:.2f}", fontsize=9)
-        else:
-            ax.set_title(v, fontsize=9)
-        ax.contour(plan.mask, levels=[0.5], colors="C2", linewidths=0.8)
-        ax.set_xlabel(f"col (px, {plan.mm_per_px:.2f} mm/px) → sensor {_axis(plan.cols)}")
-        ax.set_ylabel(f"row (px) → sensor {_axis(plan.rows)}")
-    t0, t1 = a.run.time[sg.start], a.run.time[min(sg.stop, len(a.run.time) - 1)]
-    fig.suptitle(f"{sg.finger} segment {sg.id} '{sg.label}'" + (f" feature {sg.feature}" if sg.feature >= 0 else "")
-                 + f", {t0:.2f}–{t1:.2f} s: frame at the middle, mean dynamic flow (orange), "
-                 f"aggregated direction (cyan)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return True
+def _mean_field(cf, view, s: int, e: int, estimator) -> np.ndarray | None:
+    """Mean dynamic flow field (H, W, 2) px/frame over up to :data:`FLOW_PAIRS` frame pairs of
+    [s, e) (window-relative)."""
+    vr = cf.views[view]
+    first = max(s, 1)
+    if e - first < 1:
+        return None
+    pairs = np.unique(np.linspace(first, e - 1, min(FLOW_PAIRS, e - first)).astype(int))
+    return np.mean([estimator(vr.frames[p - 1], vr.frames[p]) for p in pairs], axis=0)
 
 
 def _axis(v) -> str:
@@ -196,23 +205,134 @@ def _axis(v) -> str:
     return ("+" if v[i] > 0 else "−") + names[i]
 
 
-def make_all(a, model, out_dir: Path, cfg) -> list[str]:
-    """Write every figure into ``out_dir``; returns the file names."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    written = []
-    for name, fn in (("electrodes.png", lambda p: electrodes(a, p)), ("pressure.png", lambda p: pressure(a, p)),
-                     ("taxels.png", lambda p: taxels(a, p)), ("ellipsoid.png", lambda p: ellipsoid(a, model, p))):
-        fn(out_dir / name)
-        written.append(name)
-    rows = {r["segment"]: r for r in a.aggregates}
-    n = 0
+def _summary_line(segments, rows) -> str:
+    """Every segment of a label in the bottom view: each one's aggregated |flow| and image
+    direction (up to four), or their range and circular mean (more)."""
+    aggs = [(sg, (rows.get(sg.id) or {}).get("flows", {}).get(("bottom", "dynamic"))) for sg in segments]
+    found = [g for _, g in aggs if g is not None]
+    head = f"Bottom view, the finger's {len(segments)} segment(s) of this label (image angle): "
+    if len(segments) <= 4:
+        return head + "; ".join(
+            f"s{sg.id}" + (f" f{sg.feature}" if sg.feature >= 0 else "") + ": "
+            + (f"{g['magnitude']:.2f} mm/s at {np.degrees(g['direction']) % 360:.0f}°" if g else "–")
+            for sg, g in aggs)
+    if not found:
+        return head + "no flow"
+    mags = [g["magnitude"] for g in found]
+    angle = np.degrees(np.angle(np.mean([np.exp(1j * g["direction"]) for g in found]))) % 360
+    return head + f"|flow| {min(mags):.2f}–{max(mags):.2f} mm/s (median {np.median(mags):.2f}), mean direction {angle:.0f}°"
+
+
+def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
+    """One figure for every segment called ``label``: a row per finger (its middle segment)."""
+    by_finger: dict[str, list] = {}
+    for sg in segments:
+        if fl.find(a.flows, sg.finger, sg.start, sg.stop) is not None:
+            by_finger.setdefault(sg.finger, []).append(sg)
+    if not by_finger:
+        return None
+    views = list(model.plans)
+    n = len(by_finger)
+    est = tflow.FlowEstimator(cfg.tactile.flow)
+    fields, picked = [], []
+    for f, sgs in by_finger.items():
+        sg = sgs[len(sgs) // 2]
+        cf = fl.find(a.flows, f, sg.start, sg.stop)
+        s, e = sg.start - cf.window[0], sg.stop - cf.window[0]
+        picked.append((sg, cf, s, e))
+        fields.append({v: _mean_field(cf, v, s, e, est) for v in views if v in cf.views})
+    rate = a.run.rate_hz
+    # one scale for every arrow: the largest (field or aggregate) spans a quarter of a frame
+    h_px, w_px = next(iter(model.plans.values())).shape
+    biggest = max([np.abs(m).max() for fs in fields for m in fs.values() if m is not None] +
+                  [agg["magnitude"] / (model.plans[v].mm_per_px * rate)
+                   for sg, *_ in picked for (v, kind), agg in (rows.get(sg.id) or {}).get("flows", {}).items()
+                   if kind == "dynamic"] + [1e-6])
+    scale = biggest / (0.25 * min(h_px, w_px))               # px/frame per drawn px
+    # fixed layout in inches: per row a title, the frame, its axis labels and the summary line
+    top_in, row_in, img_in, col_in = 0.75, 2.9, 1.85, 3.6
+    W, H = col_in * len(views), top_in + row_in * n + 0.1
+    fig = _figure(W, H)
+    axes = np.array([[fig.add_axes([(0.55 + col_in * j) / W, (H - top_in - row_in * r - 0.3 - img_in) / H,
+                                    (col_in - 0.75) / W, img_in / H]) for j in range(len(views))]
+                     for r in range(n)])
+    noise = model.config.noise
+    for r, ((sg, cf, s, e), mean) in enumerate(zip(picked, fields)):
+        row = rows.get(sg.id) or {}
+        for ax, v in zip(axes[r], views):
+            plan = model.plans[v]
+            if v not in cf.views:
+                ax.set_axis_off()
+                continue
+            vr = cf.views[v]
+            ax.imshow(vr.frames[(s + e - 1) // 2], cmap="gray", vmin=0, vmax=255, origin="upper")
+            ax.contour(plan.mask, levels=[0.5], colors="C2", linewidths=0.8)
+            m = mean.get(v)
+            if m is not None:
+                step = 3
+                yy, xx = np.mgrid[0:m.shape[0]:step, 0:m.shape[1]:step]
+                keep = plan.mask[::step, ::step]
+                ax.quiver(xx[keep], yy[keep], m[::step, ::step, 0][keep], m[::step, ::step, 1][keep], color="C1",
+                          angles="xy", scale_units="xy", scale=scale, width=0.006)
+            agg = row.get("flows", {}).get((v, "dynamic"))
+            title = f"{sg.finger} {v}"
+            if agg is not None:
+                px = agg["magnitude"] / (plan.mm_per_px * rate)       # px/frame
+                title += f": {agg['magnitude']:.2f} mm/s, conf {agg['confidence']:.2f}"
+                if px >= noise and agg["confidence"] > 0:
+                    vec = np.array([np.cos(agg["direction"]), np.sin(agg["direction"])]) * px / scale
+                    c0, r0 = plan.shape[1] / 2, plan.shape[0] / 2
+                    ax.annotate("", xy=(c0 + vec[0], r0 + vec[1]), xytext=(c0, r0), gid=f"aggregate:{px!r}",
+                                arrowprops=dict(color="cyan", width=2.0, headwidth=7, shrink=0.0))
+                else:
+                    title += " (no arrow: below noise)"
+            ax.set_title(title, fontsize=8)
+            ax.set_xlabel(f"→ sensor {_axis(plan.cols)} ({plan.shape[1] * plan.mm_per_px:.0f} mm wide)", fontsize=8)
+            ax.set_ylabel(f"↓ sensor {_axis(plan.rows)}", fontsize=8)
+            ax.set_xticks([])             # pixel indices tell nothing; the labels say the axes
+            ax.set_yticks([])
+        t0, t1 = a.run.time[sg.start], a.run.time[min(sg.stop, len(a.run.time) - 1)]
+        fig.text(0.1 / W, (H - top_in - row_in * (r + 1) + 0.12) / H,
+                 f"{sg.finger} segment {sg.id}, {t0:.2f}–{t1:.2f} s. " + _summary_line(by_finger[sg.finger], rows),
+                 fontsize=7, va="bottom")
+    mm_s = biggest * model.plans[views[0]].mm_per_px * rate
+    fig.suptitle(f"'{label}' segments: the frame at a segment's middle (grey), the fingertip's outline in each view "
+                 f"(green), the mean dynamic flow (orange) and the segment's\naggregated flow (cyan): the motion of "
+                 f"the pressed pattern, which is opposite to the finger's. Arrows to scale: a quarter of a frame is "
+                 f"{mm_s:.2f} mm/s.", fontsize=8, y=1 - 0.1 / H, va="top")
+    fig.flow_scale = scale                    # px/frame per drawn px (tests check the arrows against it)
+    return fig
+
+
+def plan(a, cfg) -> tuple[list[tuple[str, list]], list[str]]:
+    """The flow figures to draw: [(label, its segments)] in order of first appearance, at most
+    ``cfg.max_segment_figures``; and the labels left out by that cap."""
+    by_label: dict[str, list] = {}
     for sg in a.segments:
-        if n >= cfg.max_segment_figures:
-            break
-        if sg.label in ("approach", "lift", "no_contact"):
-            continue
-        name = f"flow_{sg.finger}_s{sg.id:03d}_{sg.label}.png"
-        if segment_flow(a, model, sg, rows.get(sg.id), out_dir / name, cfg):
-            written.append(name)
-            n += 1
-    return written
+        if sg.label not in NO_FLOW_FIGURE:
+            by_label.setdefault(sg.label, []).append(sg)
+    items = list(by_label.items())
+    return items[:cfg.max_segment_figures], [k for k, _ in items[cfg.max_segment_figures:]]
+
+
+def build_all(a, model, cfg):
+    """Every figure: [(file name, Figure)] and the flow labels the cap left out."""
+    out = [("electrodes.png", electrodes(a)), ("pressure.png", pressure(a)), ("taxels.png", taxels(a)),
+           ("ellipsoid.png", ellipsoid(a, model))]
+    rows = {r["segment"]: r for r in a.aggregates}
+    drawn, left_out = plan(a, cfg)
+    for label, segments in drawn:
+        fig = flow_label(a, model, label, segments, rows, cfg)
+        if fig is not None:
+            out.append((f"flow_{label}.png", fig))
+    return out, left_out
+
+
+def make_all(a, model, out_dir: Path, cfg) -> tuple[list[str], list[str]]:
+    """Write every figure into ``out_dir``. Returns the file names and the segment labels whose
+    flow figure the cap ``max_segment_figures`` left out."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    figures, left_out = build_all(a, model, cfg)
+    for name, fig in figures:
+        fig.savefig(out_dir / name, dpi=90)
+    return [n for n, _ in figures], left_out

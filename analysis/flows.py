@@ -15,8 +15,15 @@ the static flow from the run's primary reference (``analysis.flow.reference``):
   unloaded state is what carries a slip's direction there;
 - ``time``: the frame at ``analysis.flow.reference_time_s``.
 
-The views of the slip estimate (``analysis.slip.views``) also get the static flow from the
-other references, as evidence. Frames out of contact are never rendered. Intensity
+The static flow is computed only where an estimate reads it (``analysis.flow.static: auto``):
+the views of the slip estimate (``analysis.slip.views``) get it from every available reference,
+as evidence, and a pour's rotation phase reads the primary reference's rotation in every view;
+the crossings of a sweep read the dynamic flow alone. ``analysis.flow.static: all`` computes the
+primary static flow in every view (their ``static`` aggregates in ``summary.json``) as well.
+
+``workers`` threads run the (contact window, view) jobs at once: rendering (numba, ``nogil``)
+and OpenCV's flow release the GIL, and every job is independent and written to its own slot,
+so the results are the same, bit for bit, with any number of workers. Frames out of contact are never rendered. Intensity
 (``analysis.tactile.intensity_range``): ``contact`` maps 0 kΩ … the window's peak activation
 to 0 … 255, so a light contact uses the whole 8-bit range as a firm one does (Farnebäck's
 estimate shrinks with the image's contrast: at 1/50 of full scale it reports 2 % of a
@@ -25,7 +32,9 @@ blob's true shift); a fixed ``[low, high]`` maps the same kΩ to the same grey i
 
 from __future__ import annotations
 
+import os
 import time as _time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,12 +83,14 @@ class FlowPlan:
 
     ``primary``: ``contact_onset``, ``unloaded`` or ``time``; ``reference_frame``: absolute
     frame of the ``time`` reference; ``evidence_views``: views that get the static flow from
-    every available reference; ``intensity``: ``contact`` or ``fixed``; ``load_fraction``: of
+    every available reference; ``static_views``: views that get the static flow from the
+    primary reference; ``intensity``: ``contact`` or ``fixed``; ``load_fraction``: of
     the contact's median load, reached at the contact onset."""
 
     primary: str
     reference_frame: int | None = None
     evidence_views: tuple[str, ...] = ()
+    static_views: tuple[str, ...] = ()
     intensity: str = "contact"
     load_fraction: float = 0.8
 
@@ -91,13 +102,23 @@ def primary_reference(setting: str, baseline_kind: str) -> str:
     return ONSET if baseline_kind == "tare" else UNLOADED
 
 
+def available_workers() -> int:
+    """The cores this process may run on (its CPU affinity, not the machine's count)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:                       # pragma: no cover - macOS, Windows
+        return max(1, os.cpu_count() or 1)
+
+
 def compute(prepared, contacts: dict[str, list[tuple[int, int]]], fingers: list[str], model, margin: int,
             signal: np.ndarray, threshold: dict[str, float], settle: int, plan: FlowPlan,
-            keep_fields: bool = False, progress: bool = True):
-    """Flow for every (finger, contact). Returns (list of ContactFlow, seconds spent in flow+render).
+            keep_fields: bool = False, progress: bool = True, workers: int = 1):
+    """Flow for every (finger, contact). Returns (list of ContactFlow, CPU seconds of the
+    rendering and flow jobs: their wall time summed, so the same with any ``workers``).
 
     ``contacts``: finger → contact intervals; ``signal`` (T, F) and ``threshold``: finger →
-    level: the contact signal and its threshold, for the contact onset.
+    level: the contact signal and its threshold, for the contact onset; ``workers``: threads
+    running the (window, view) jobs.
     """
     from tqdm import tqdm
     views = list(model.plans)
@@ -110,35 +131,53 @@ def compute(prepared, contacts: dict[str, list[tuple[int, int]]], fingers: list[
     total = sum((w1 - w0) * len(views) for *_, (w0, w1) in jobs)
     bar = tqdm(total=total, unit="frame", desc="tactile flow", leave=False, disable=not progress or total == 0,
                dynamic_ncols=True)
-    out, spent = [], 0.0
+    out, tasks = [], []
+    for f, k, (a, b), (w0, w1) in jobs:
+        act = prepared.activation[w0:w1, k]
+        try:
+            settled = onset = w0 + tflow.contact_reference(signal[w0:w1, k], threshold[f],
+                                                           settle=min(settle, max(1, b - a)))
+            if a > 0:           # a record that begins in contact begins loaded: its first settled frame
+                onset = tflow.loaded_reference(prepared.score[:b, k], onset, plan.load_fraction)
+        except ValueError:
+            settled = onset = None
+        cf = ContactFlow(f, k, (a, b), (w0, w1), onset, settled, begins_in_contact=a == 0)
+        refs = {UNLOADED: None}
+        if onset is not None:
+            refs[ONSET] = onset - w0
+        if plan.reference_frame is not None and w0 <= plan.reference_frame < w1:
+            refs[TIME] = plan.reference_frame - w0
+        intensity = None
+        if plan.intensity == "contact":
+            intensity = (0.0, max(float(act.max()), MIN_PEAK_KOHM))
+        for v in views:
+            if v in plan.evidence_views:
+                wanted = refs
+            elif v in plan.static_views:
+                wanted = {r: i for r, i in refs.items() if r == plan.primary}
+            else:
+                wanted = {}
+            tasks.append((cf, v, act, wanted, intensity))
+        out.append(cf)
+
+    def job(task):
+        cf, v, act, wanted, intensity = task
+        t0 = _time.perf_counter()
+        result = process_view(model, act, v, references=wanted, primary=plan.primary,
+                              intensity_range=intensity, keep_fields=keep_fields, progress=bar.update)
+        return result, _time.perf_counter() - t0
+
     try:
-        for f, k, (a, b), (w0, w1) in jobs:
-            act = prepared.activation[w0:w1, k]
-            try:
-                settled = onset = w0 + tflow.contact_reference(signal[w0:w1, k], threshold[f],
-                                                               settle=min(settle, max(1, b - a)))
-                if a > 0:           # a record that begins in contact begins loaded: its first settled frame
-                    onset = tflow.loaded_reference(prepared.score[:b, k], onset, plan.load_fraction)
-            except ValueError:
-                settled = onset = None
-            cf = ContactFlow(f, k, (a, b), (w0, w1), onset, settled, begins_in_contact=a == 0)
-            refs = {UNLOADED: None}
-            if onset is not None:
-                refs[ONSET] = onset - w0
-            if plan.reference_frame is not None and w0 <= plan.reference_frame < w1:
-                refs[TIME] = plan.reference_frame - w0
-            intensity = None
-            if plan.intensity == "contact":
-                intensity = (0.0, max(float(act.max()), MIN_PEAK_KOHM))
-            t0 = _time.perf_counter()
-            for v in views:
-                wanted = refs if v in plan.evidence_views else {r: i for r, i in refs.items() if r == plan.primary}
-                cf.views[v] = process_view(model, act, v, references=wanted, primary=plan.primary,
-                                           intensity_range=intensity, keep_fields=keep_fields, progress=bar.update)
-            spent += _time.perf_counter() - t0
-            out.append(cf)
+        if workers > 1 and len(tasks) > 1:
+            with ThreadPoolExecutor(max_workers=min(workers, len(tasks))) as pool:
+                done = list(pool.map(job, tasks))
+        else:
+            done = [job(t) for t in tasks]
     finally:
         bar.close()
+    for (cf, v, *_), (result, _) in zip(tasks, done):
+        cf.views[v] = result
+    spent = sum(s for _, s in done)
     return out, spent
 
 

@@ -21,7 +21,7 @@ from . import labels as lab
 from . import segments as seg
 from . import slip as slp
 from .load import RunData
-from .preprocess import Prepared, prepare
+from .preprocess import PreparedRun, prepare
 
 _MODELS: dict = {}
 EDGE_REACH_S = 0.2
@@ -42,7 +42,7 @@ class Analysis:
     """Everything computed for one run (see :mod:`analysis.results` for the stored layout)."""
 
     run: RunData
-    prepared: Prepared
+    prepared: PreparedRun
     scheme: str
     contacts: dict                       # finger → [(start, stop)]
     thresholds: dict                     # finger → pressure threshold
@@ -60,7 +60,7 @@ class Analysis:
     timing: dict = field(default_factory=dict)
 
 
-def contact_method(prepared: Prepared, cfg) -> str:
+def contact_method(prepared: PreparedRun, cfg) -> str:
     """``analysis.contact.method`` resolved: ``auto`` is the pressure after a tare, the electrode
     pattern otherwise (no rest stretch to measure a pressure's noise on, or none at all)."""
     if cfg.contact.method != "auto":
@@ -68,7 +68,17 @@ def contact_method(prepared: Prepared, cfg) -> str:
     return "pressure" if prepared.baseline.kind == "tare" else "pattern"
 
 
-def _threshold(prepared: Prepared, k: int, cfg) -> float:
+def static_views(cfg, scheme: str) -> tuple[str, ...]:
+    """Views that get the static flow from the primary reference (besides the slip's evidence
+    views, which get it from every reference): every view with ``analysis.flow.static=all`` and
+    for a pour (its rotation phase is the static rotation averaged over the views); none
+    otherwise: no sweep or generic estimate reads it."""
+    if cfg.static_flow == "all" or scheme == lab.POUR:
+        return tuple(cfg.views)
+    return ()
+
+
+def _threshold(prepared: PreparedRun, k: int, cfg) -> float:
     s = cfg.segmentation
     floor = s.contact_min_pdc if prepared.pressure_name == "pdc" else s.contact_min_proxy
     if prepared.baseline.kind != "tare":
@@ -138,10 +148,11 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
     plan = fl.FlowPlan(primary=fl.primary_reference(cfg.reference, prepared.baseline.kind),
                        reference_frame=None if cfg.reference_time_s is None else
                        int(np.searchsorted(run.time, cfg.reference_time_s)),
-                       evidence_views=tuple(cfg.slip.views), intensity=cfg.intensity,
-                       load_fraction=s.load_fraction)
+                       evidence_views=tuple(cfg.slip.views), static_views=static_views(cfg, scheme),
+                       intensity=cfg.intensity, load_fraction=s.load_fraction)
     flows, flow_s = fl.compute(prepared, contacts, run.fingers, model, margin, signal, thresholds, s.settle_frames,
-                               plan, keep_fields=cfg.save_fields, progress=cfg.progress)
+                               plan, keep_fields=cfg.save_fields, progress=cfg.progress,
+                               workers=cfg.workers or fl.available_workers())
     t_flow = _time.perf_counter()
 
     segments: list[lab.Segment] = []

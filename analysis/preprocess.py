@@ -68,7 +68,7 @@ class Baseline:
 
 
 @dataclass
-class Prepared:
+class PreparedRun:
     """Smoothed activation, pressure and contact score of every finger.
 
     Attributes:
@@ -205,7 +205,7 @@ def despike(impedance: np.ndarray, frames: int) -> np.ndarray:
     return median_filter(impedance, size=(frames | 1,) + (1,) * (impedance.ndim - 1), mode="nearest")
 
 
-def prepare(run: RunData, cfg, model) -> Prepared:
+def prepare(run: RunData, cfg, model) -> PreparedRun:
     """Baseline → activation → despike + Kalman/RTS → pressure and contact score, all fingers."""
     valid = run.valid if run.valid is not None else np.ones(run.electrodes.shape[:2], bool)
     imp, unusable, repaired = repair(run.electrodes, valid, run.fingers)
@@ -234,7 +234,7 @@ def prepare(run: RunData, cfg, model) -> Prepared:
     fine = tcontact.contact_score(tcontact.relative_change(light, baseline.impedance), noise, baseline.uncertainty)
     for f in unusable:
         score[:, run.fingers.index(f)] = fine[:, run.fingers.index(f)] = 0.0
-    return Prepared(raw_activation=raw, activation=act, pressure=pressure, proxy=proxy, pressure_units=units,
+    return PreparedRun(raw_activation=raw, activation=act, pressure=pressure, proxy=proxy, pressure_units=units,
                     pressure_name=name, baseline=baseline, rest_noise=rest_noise, noise=noise, score=score,
                     fine_score=fine,
                     unusable=unusable, repaired=repaired)

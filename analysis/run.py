@@ -162,7 +162,11 @@ def _analyse_and_write(store_path: Path, cfg, console) -> dict:
                                    fields=cfg.save_fields)
         results.write_store(tree, staging / "analysis.zarr")
         if cfg.figures:
-            summary["figures"] = figs.make_all(a, model, staging / "figures", cfg)
+            summary["figures"], left_out = figs.make_all(a, model, staging / "figures", cfg)
+            if left_out:
+                summary["figures_left_out"] = {
+                    "labels": left_out, "reason": f"one flow figure per label, at most max_segment_figures="
+                                                  f"{cfg.max_segment_figures}"}
         if score is not None:
             (staging / "score.json").write_text(results.dumps(score))
         (staging / "summary.json").write_text(results.dumps(summary))

@@ -26,7 +26,7 @@ TACTILE_RUN = Path(sys.executable).parent / "tactile-run"
 
 # protocol -> [(gallery name, glob in the run's figures/)]; of several matches the middle one
 GALLERY = {
-    "straws_sweep": [("pressure", "pressure.png"), ("flow_during", "flow_ff*during*.png")],
+    "straws_sweep": [("pressure", "pressure.png"), ("flow_during", "flow_during.png")],
     "sticks_sweep": [("taxels", "taxels.png"), ("ellipsoid", "ellipsoid.png")],
     "pour_grasp": [("pressure", "pressure.png"), ("taxels", "taxels.png")],
     "pour_grasp_reactive": [("pressure", "pressure.png"), ("electrodes", "electrodes.png")],

@@ -149,7 +149,8 @@ def targets_table() -> str:
              "boundary_error_mm_median": "sweeps: segment boundaries in mm of travel (time error × sweep speed; "
                                          "a run with no boundary to measure counts as not met)",
              "boundary_error_ms_median": "pours: phase onsets (a run with no onset found counts as not met)",
-             "slip_onset_error_ms": "pours (the analysis found pour phases)"}
+             "slip_onset_error_ms": "pours (the analysis found pour phases)",
+             "pour_phase_error_ms_max": "pours: every phase onset (the median alone hid a preset that moved one by seconds)"}
     for key, limit in score.TARGETS.items():
         u = re.search(r"_(mm|ms|deg)(?:_|$)", key)
         bound = f"≥ {limit:g} (all)" if key.endswith("fraction") else f"≤ {limit:g} {u.group(1) if u else ''}"

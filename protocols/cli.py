@@ -26,9 +26,7 @@ from omegaconf import OmegaConf
 from cliapp.runner import report, run_app
 from runstore import RunStatus, rundir
 
-from . import resume
 from .interrupts import Interrupts
-from .run import RunResult, hand_off, run_protocol
 from .schema import check_targets, register
 
 log = logging.getLogger("tactile-run")
@@ -72,6 +70,8 @@ def run_job(cfg, console=console, interrupts: Interrupts | None = None) -> int:
 
 
 def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
+    from . import resume                            # the run store, the simulator, numba: not for --help
+    from .run import RunResult, hand_off, run_protocol
     try:
         check_targets(cfg)
         _refuse_parallel_hardware(cfg, hc)
@@ -206,6 +206,7 @@ class SweepSummary(Callback):
 
 def sweep_rows(root: Path) -> list[dict]:
     """One row per job directory under ``root`` that holds a ``run.json``."""
+    from . import resume
     rows = []
     for run_json in sorted(root.glob("*/run.json"), key=lambda p: _job_number(p.parent.name)):
         job = run_json.parent

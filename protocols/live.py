@@ -25,11 +25,12 @@ from typing import Optional
 
 import numpy as np
 
-from tactile import signals
+from tactile._lazy import lazy_import
 from tactile.flow import FlowConfig
-from tactile.online import OnlineFlow
 from tactile.pipeline import TactileConfig, TactileModel
 from tactile.slip import CAUSES, SlipConfig, SlipDetector
+
+signals, online = lazy_import("tactile.signals"), lazy_import("tactile.online")   # numba: on first use
 
 ARROWS = "→↘↓↙←↖↑↗"          # image directions: +col is right, +row is down
 VIEWER_ENTRY_POINTS = "tactile_flow.live_viewer"     # live.viewer=NAME names one of these
@@ -113,7 +114,7 @@ def warm_up(model: TactileModel, views) -> None:
     """Run the online pipeline on a few made-up frames, so that its compiled kernels (numba
     compiles on first use: seconds on the first run after an install) are ready before the
     run starts, not while the first frames queue up."""
-    flow = OnlineFlow(model, np.full((1, 24), 10.0), ("ff",), views)
+    flow = online.OnlineFlow(model, np.full((1, 24), 10.0), ("ff",), views)
     for i in range(3):
         flow.push(i, 0.01 * i, np.full((1, 24), 3000 - 100 * i))
 
@@ -130,7 +131,7 @@ def tactile_config(analysis: dict, views) -> TactileConfig:
     if isinstance(tk.get("intensity_range"), str):
         tk.pop("intensity_range")
     fk = {k: v for k, v in dict(analysis.get("flow") or {}).items()
-          if k not in ("dis", "tvl1", "reference", "reference_time_s")}
+          if k not in ("dis", "tvl1", "reference", "reference_time_s", "static")}
     known = {f.name for f in fields(TactileConfig)}
     unknown = sorted(set(tk) - known)
     if unknown:
@@ -174,7 +175,7 @@ class LiveMonitor:
         self.biotac = biotac
         self.tap = biotac.tap(maxlen=int(10 * biotac.rate_hz))        # 10 s: a stalled engine drops, never grows
         self.detector = SlipDetector(len(self.fingers), slip_config(cfg.slip))
-        self.flow: OnlineFlow | None = None
+        self.flow: online.OnlineFlow | None = None
         self._rest_sum = np.zeros((len(self.fingers), 24))
         self._rest_n = 0
         self._next_display = -math.inf
@@ -191,7 +192,7 @@ class LiveMonitor:
         if self._rest_n == 0:
             raise RuntimeError("live: no valid BioTac frame during the tare; cannot set the rest impedance")
         rest = self._rest_sum / self._rest_n
-        self.flow = OnlineFlow(self.model, rest, self.fingers, self.views)
+        self.flow = online.OnlineFlow(self.model, rest, self.fingers, self.views)
 
     def close(self) -> dict:
         """Stop tapping the stream; return what the monitor did, for the store's root attribute
@@ -314,7 +315,7 @@ def replay(model: TactileModel, rest_impedance, seq, t, electrodes, fingers, sli
     Returns ``detections`` [(t, finger, cause)] of every frame that fired, ``first`` (or
     None), ``frames``, and the online pipeline's per-finger ``counters``.
     """
-    flow = OnlineFlow(model, rest_impedance, fingers)
+    flow = online.OnlineFlow(model, rest_impedance, fingers)
     det = SlipDetector(len(fingers), slip)
     hits = []
     for i in range(len(t)):

@@ -16,6 +16,9 @@ from scipy import ndimage
 
 from ._checks import finite_array
 
+__all__ = ["FlowAggregates", "aggregate_flow", "aggregation_constants", "centre_of_pressure",
+           "flow_functionals", "window"]
+
 
 @dataclass(frozen=True)
 class FlowAggregates:
@@ -38,7 +41,7 @@ class FlowAggregates:
     confidence: np.ndarray
 
 
-def aggregate_flow(flow, mask, noise: float = 0.05) -> FlowAggregates:
+def aggregate_flow(flow, mask, *, noise: float = 0.05) -> FlowAggregates:
     """Summarise a flow field (T, H, W, 2) over the footprint ``mask`` (H, W) bool.
 
     ``noise``: magnitude (flow units) below which a pixel counts as not moving, for
@@ -57,14 +60,14 @@ def aggregate_flow(flow, mask, noise: float = 0.05) -> FlowAggregates:
         raise ValueError("mask: expected a footprint with at least one pixel, got an empty mask")
     n = len(flow)
     sums, moving = np.empty((n, 4)), np.empty(n, np.float32)
-    _aggregate(np.ascontiguousarray(flow).reshape(n, -1), *kernel_weights(mask, noise), sums, moving)
+    _aggregate(np.ascontiguousarray(flow).reshape(n, -1), *aggregation_constants(mask, noise), sums, moving)
     mean, divergence, curl = sums[:, :2].copy(), sums[:, 2].copy(), sums[:, 3].copy()
     return FlowAggregates(mean=mean, magnitude=np.hypot(mean[:, 0], mean[:, 1]),
                           direction=np.arctan2(mean[:, 1], mean[:, 0]),
                           divergence=divergence, curl=curl, confidence=moving / np.float64(mask.sum()))
 
 
-def kernel_weights(mask, noise: float) -> tuple:
+def aggregation_constants(mask, noise: float) -> tuple:
     """The constant arguments of :func:`_aggregate` for a footprint (H, W) bool and a noise
     level: ``(in_mask, d_col, d_row, mask01, noise2)``, computed once per view."""
     mask = np.asarray(mask, dtype=bool)

@@ -15,10 +15,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
+__all__ = ["DIS_PRESETS", "METHODS", "FlowConfig", "FlowEstimator", "contact_reference", "dynamic_flow",
+           "loaded_reference", "static_flow", "to_mm", "to_mm_per_s"]
+
 METHODS = ("farneback", "dis", "tvl1")
+DIS_PRESETS = {"ultrafast": 0, "fast": 1, "medium": 2}
+"""OpenCV's DIS presets by name (``cv2.DISOPTICAL_FLOW_PRESET_*``); speed and accuracy of each
+on the simulated protocols in ``docs/performance.md``."""
 
 
 @dataclass(frozen=True)
@@ -26,7 +31,8 @@ class FlowConfig:
     """Dense flow method and its parameters (names as OpenCV's).
 
     ``farneback``: pyr_scale, levels, winsize, iterations, poly_n, poly_sigma, flags.
-    ``dis``: preset (0 ultrafast, 1 fast, 2 medium), plus optional overrides in ``dis``.
+    ``dis``: ``dis_preset`` (``ultrafast``, ``fast`` or ``medium``; OpenCV's 0, 1, 2 also
+    accepted), plus optional overrides in ``dis``.
     ``tvl1``: keyword arguments of ``cv2.optflow.DualTVL1OpticalFlow_create``.
     """
 
@@ -38,13 +44,15 @@ class FlowConfig:
     poly_n: int = 5
     poly_sigma: float = 1.2
     flags: int = 0
-    dis_preset: int = 2
+    dis_preset: str | int = "medium"
     dis: dict = field(default_factory=dict)
     tvl1: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if self.method not in METHODS:
             raise ValueError(f"flow.method: expected one of {', '.join(METHODS)}, got {self.method!r}")
+        if self.dis_preset not in DIS_PRESETS and self.dis_preset not in DIS_PRESETS.values():
+            raise ValueError(f"flow.dis_preset: expected one of {', '.join(DIS_PRESETS)}, got {self.dis_preset!r}")
         if not 0 < self.pyr_scale < 1:
             raise ValueError(f"flow.pyr_scale: expected a value in (0, 1), got {self.pyr_scale!r}")
         for name in ("levels", "winsize", "iterations", "poly_n"):
@@ -59,10 +67,12 @@ class FlowEstimator:
     """
 
     def __init__(self, config: FlowConfig = FlowConfig()):
+        import cv2
         self.config = config
         self._algo = None
+        self._farneback = cv2.calcOpticalFlowFarneback
         if config.method == "dis":
-            self._algo = cv2.DISOpticalFlow_create(config.dis_preset)
+            self._algo = cv2.DISOpticalFlow_create(DIS_PRESETS.get(config.dis_preset, config.dis_preset))
             for key, value in config.dis.items():
                 getattr(self._algo, "set" + key[0].upper() + key[1:])(value)
         elif config.method == "tvl1":
@@ -72,7 +82,7 @@ class FlowEstimator:
         """Flow (H, W, 2) float32 in pixels that carries ``prev`` (H, W uint8) onto ``nxt``."""
         c = self.config
         if self._algo is None:
-            return cv2.calcOpticalFlowFarneback(prev, nxt, None, c.pyr_scale, c.levels, c.winsize,
+            return self._farneback(prev, nxt, None, c.pyr_scale, c.levels, c.winsize,
                                                 c.iterations, c.poly_n, c.poly_sigma, c.flags)
         return self._algo.calc(prev, nxt, None)
 
@@ -87,8 +97,15 @@ def _check_frames(frames) -> np.ndarray:
     return frames
 
 
-def dynamic_flow(frames, config: FlowConfig = FlowConfig()) -> np.ndarray:
-    """Flow between consecutive frames: (T, H, W) uint8 → (T, H, W, 2) px/frame, flow[0] = 0."""
+def dynamic_flow(frames, *, config: FlowConfig = FlowConfig()) -> np.ndarray:
+    """Flow between consecutive frames: (T, H, W) uint8 → (T, H, W, 2) px/frame, flow[0] = 0.
+
+    >>> import numpy as np
+    >>> frames = np.zeros((2, 32, 32), np.uint8); frames[0, 12:20, 10:18] = frames[1, 12:20, 11:19] = 200
+    >>> f = dynamic_flow(frames)
+    >>> f.shape, bool(f[1, 14:18, 12:16, 0].mean() > 0.3)            # the square moved right
+    ((2, 32, 32, 2), True)
+    """
     frames = _check_frames(frames)
     estimate = FlowEstimator(config)
     out = np.zeros(frames.shape + (2,), np.float32)
@@ -97,7 +114,7 @@ def dynamic_flow(frames, config: FlowConfig = FlowConfig()) -> np.ndarray:
     return out
 
 
-def static_flow(frames, reference, config: FlowConfig = FlowConfig()) -> np.ndarray:
+def static_flow(frames, reference, *, config: FlowConfig = FlowConfig()) -> np.ndarray:
     """Flow from a reference frame to every frame: → (T, H, W, 2) px.
 
     ``reference``: an index into ``frames`` or an (H, W) uint8 frame (e.g. the unloaded one).
@@ -156,11 +173,15 @@ def loaded_reference(load, start: int, fraction: float = 0.8) -> int:
     return start + int(hits[0]) if hits.size else start
 
 
-def to_mm_per_s(flow_px, mm_per_px: float, rate_hz: float) -> np.ndarray:
-    """Dynamic flow px/frame → mm/s on the view plane."""
+def to_mm_per_s(flow_px, *, mm_per_px: float, rate_hz: float) -> np.ndarray:
+    """Dynamic flow px/frame → mm/s on the view plane.
+
+    >>> float(to_mm_per_s(0.5, mm_per_px=0.74, rate_hz=100.0))
+    37.0
+    """
     return np.asarray(flow_px) * np.float32(mm_per_px * rate_hz)
 
 
-def to_mm(flow_px, mm_per_px: float) -> np.ndarray:
+def to_mm(flow_px, *, mm_per_px: float) -> np.ndarray:
     """Static flow px → mm on the view plane."""
     return np.asarray(flow_px) * np.float32(mm_per_px)

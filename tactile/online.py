@@ -63,7 +63,7 @@ import cv2
 import numba
 import numpy as np
 
-from . import N_TAXELS, aggregate, flow, frames, signals
+from . import N_TAXELS, _frame_kernels, aggregate, flow, frames, signals
 from ._checks import finite_array
 from .pipeline import TactileModel
 
@@ -247,7 +247,7 @@ class OnlineFlow:
                       *frames.frame_geometry(plan, model.mesh, c.scale))
             scratch = (np.empty(len(plan.vertices)), *frames.frame_scratch(plan))
             linear = (model.operators[name].T, np.empty((1, plan.mask.size), np.float32))
-            self._per_view.append((render, scratch, linear, aggregate.kernel_weights(plan.mask, c.noise)))
+            self._per_view.append((render, scratch, linear, aggregate.aggregation_constants(plan.mask, c.noise)))
         self._n_mask = np.array([model.plans[name].mask.sum() for name in self.views], np.float64)
 
         # Per finger × view: two 8-bit frames, the walk cache, the flow field, result slots.
@@ -349,9 +349,9 @@ class OnlineFlow:
             if self._linear:
                 x32, op_t, out, img, low, gain, frame = render
                 np.matmul(x32, op_t, out=out)
-                frames._store_u8(img, low, gain, frame)
+                _frame_kernels._store_u8(img, low, gain, frame)
             else:
-                frames._render_activation_u8(*render)
+                _frame_kernels._render_activation_u8(*render)
             if first:
                 field[:] = 0.0
             elif self._farneback:

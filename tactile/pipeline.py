@@ -15,8 +15,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import aggregate, flow, frames, geometry, signals, surface
+from . import flow
 from ._checks import finite_array
+from ._lazy import lazy_import
+
+__all__ = ["UNLOADED", "TactileConfig", "TactileModel", "ViewResult", "activation_from_counts",
+           "process_view"]
+
+# numba kernels and SciPy load on first use: the configs above import in milliseconds
+aggregate, frames, geometry = (lazy_import(f"tactile.{m}") for m in ("aggregate", "frames", "geometry"))
+signals, surface = lazy_import("tactile.signals"), lazy_import("tactile.surface")
 
 
 @dataclass(frozen=True)
@@ -97,7 +105,7 @@ class TactileModel:
         if unknown:
             raise ValueError(f"views: unknown view(s) {unknown}; expected names from {sorted(known)}")
         margin = max(config.scale * config.intensity_range[1], 0.0) + 0.5
-        plans = {name: frames.make_plan(mesh, known[name], size=config.size, margin=margin)
+        plans = {name: frames.make_frame_plan(mesh, known[name], size=config.size, margin=margin)
                  for name in config.views}
         operators = {name: (frames.linear_operator(plan, mesh) @ weights).astype(np.float32)
                      for name, plan in plans.items()}
@@ -219,14 +227,14 @@ def process_view(model: TactileModel, activation, view: str, reference: int | No
         if progress:
             progress(stop - start)
 
-    dyn = flow.dynamic_flow(u8, c.flow)
+    dyn = flow.dynamic_flow(u8, config=c.flow)
     primary = primary if primary is not None else next(iter(refs), None)
-    result = ViewResult(frames=u8, dynamic=aggregate.aggregate_flow(dyn, plan.mask, c.noise), references=refs,
+    result = ViewResult(frames=u8, dynamic=aggregate.aggregate_flow(dyn, plan.mask, noise=c.noise), references=refs,
                         primary=primary, intensity_range=rng, dynamic_field=dyn if keep_fields else None)
     for name, index in refs.items():
         ref = np.zeros(plan.shape, np.uint8) if index is None else index
-        sta = flow.static_flow(u8, ref, c.flow)
-        result.statics[name] = aggregate.aggregate_flow(sta, plan.mask, c.noise)
+        sta = flow.static_flow(u8, ref, config=c.flow)
+        result.statics[name] = aggregate.aggregate_flow(sta, plan.mask, noise=c.noise)
         if keep_fields and name == primary:
             result.static_field = sta
     return result

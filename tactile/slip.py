@@ -43,6 +43,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+__all__ = ["SlipConfig", "SlipDetector", "SlipState"]
+
 CAUSES = ("", "release", "creep", "rotation")
 """Codes of :attr:`SlipState.cause`: 0 none, 1 release, 2 creep, 3 rotation."""
 

@@ -1,6 +1,6 @@
 """The sensor's surface mesh, kernel interpolation of taxel values, and the *tactile surface*.
 
-The fitted half-ellipsoid (see :mod:`tactile.geometry`) is sampled on rings of constant θ
+The fitted half-ellipsoid (see :mod:`tactile.ellipsoid`) is sampled on rings of constant θ
 between the rim (θ = π/2, z = centre) and the pad's pole (θ = π). Each ring carries a
 number of vertices proportional to its circumference, so vertices are spaced about
 ``spacing`` mm apart everywhere, including near the pole where a plain (θ, φ) grid would
@@ -19,8 +19,14 @@ from functools import cached_property
 
 import numpy as np
 
-from . import geometry
 from ._checks import finite_array, positive
+from .ellipsoid import ellipsoid_normals, ellipsoid_points, project_to_ellipsoid
+from .geodesic_cache import cached_geodesic_distances
+
+__all__ = ["KERNEL_FORMS", "SurfaceMesh", "build_mesh", "interpolate", "interpolation_weights",
+           "kernel_weights", "tactile_surface"]
+
+KERNEL_FORMS = ("paper", "squared")
 
 
 @dataclass(frozen=True)
@@ -30,7 +36,7 @@ class SurfaceMesh:
     Attributes:
         points: (M, 3) vertex positions, mm, sensor frame (ellipsoid centre added).
         normals: (M, 3) unit outward normals.
-        theta, phi: (M,) ellipsoid parameters of each vertex (rad), see :mod:`tactile.geometry`.
+        theta, phi: (M,) ellipsoid parameters of each vertex (rad), see :mod:`tactile.ellipsoid`.
         triangles: (F, 3) int32 vertex indices, counter-clockwise seen from outside.
         centre: (3,) ellipsoid centre, mm.  axes: (3,) semi-axes along x, y, z, mm.
     """
@@ -100,8 +106,8 @@ def build_mesh(centre, axes, spacing: float = 0.6) -> SurfaceMesh:
             tris.extend([(i0 + k, i0 + (k + 1) % n0, pole) for k in range(n0)])
     triangles = np.asarray(tris, dtype=np.int32)
 
-    local = geometry.ellipsoid_points(axes, theta, phi)
-    normals = geometry.ellipsoid_normals(axes, local)
+    local = ellipsoid_points(axes, theta, phi)
+    normals = ellipsoid_normals(axes, local)
     triangles = _orient_outward(local + centre, normals, triangles)
     return SurfaceMesh(points=local + centre, normals=normals, theta=theta, phi=phi,
                        triangles=triangles, centre=centre, axes=axes)
@@ -145,16 +151,15 @@ def interpolation_weights(mesh: SurfaceMesh, taxels, sigma: float = 2.0,
         kernel: ``"paper"`` for exp(−d/(2σ²)) as the method writes it, ``"squared"`` for
             exp(−d²/(2σ²)).
         geodesic: ``"accurate"`` (default) or ``"paper"``, see
-            :func:`tactile.geometry.geodesic_distances`. Distances are cached on disk.
+            :func:`tactile.geodesic.geodesic_distances`. Distances are cached on disk.
 
     Returns:
         (M, 24) weights, rows summing to 1: ``values = activation @ weights.T``.
     """
     taxels = finite_array("taxels", taxels, ndim=2, last=3)
-    on_surface = geometry.project_to_ellipsoid(mesh.axes, taxels - mesh.centre)
-    d = geometry.cached_geodesic_distances(mesh.axes, mesh.local_points, on_surface,
-                                           method=geodesic, cache_dir=cache_dir)
-    return geometry.kernel_weights(d, sigma, form=kernel)
+    on_surface = project_to_ellipsoid(mesh.axes, taxels - mesh.centre)
+    d = cached_geodesic_distances(mesh.axes, mesh.local_points, on_surface, method=geodesic, cache_dir=cache_dir)
+    return kernel_weights(d, sigma, form=kernel)
 
 
 def interpolate(activation, weights) -> np.ndarray:
@@ -176,3 +181,30 @@ def tactile_surface(mesh: SurfaceMesh, values, scale: float) -> np.ndarray:
     """
     values = finite_array("values", values, last=mesh.n_vertices)
     return mesh.points + float(scale) * values[..., None] * mesh.normals
+
+
+def kernel_weights(distances, sigma, *, form: str = "paper", normalise: bool = True) -> np.ndarray:
+    """Kernel weights of geodesic ``distances`` (..., n_taxels) mm, same shape.
+
+    form ``"paper"``: ``exp(-d / (2 sigma^2))``, exactly as the method writes it (d in mm,
+    sigma in mm, so the exponent is not dimensionless; kept for fidelity).
+    form ``"squared"``: the Gaussian ``exp(-d^2 / (2 sigma^2))``.
+    normalise: Nadaraya-Watson weights, each row (last axis) summing to 1; computed with
+    the row's largest exponent subtracted, so rows far from every taxel do not underflow.
+
+    >>> kernel_weights([[0.0, 2.0]], 1.0).round(3).tolist()     # the nearer taxel weighs e times more
+    [[0.731, 0.269]]
+    """
+    d = finite_array("distances", distances, ndim=(1, 2))
+    if d.shape[-1] == 0:
+        raise ValueError(f"distances: expected at least one column, got shape {d.shape}")
+    if np.any(d < 0):
+        raise ValueError("distances: expected distances >= 0 (mm)")
+    s = positive("sigma", sigma)
+    if form not in KERNEL_FORMS:
+        raise ValueError(f"form: expected one of {KERNEL_FORMS}, got {form!r}")
+    exponent = -(d if form == "paper" else d * d) / (2.0 * s * s)
+    if not normalise:
+        return np.exp(exponent)
+    w = np.exp(exponent - exponent.max(axis=-1, keepdims=True))
+    return w / w.sum(axis=-1, keepdims=True)

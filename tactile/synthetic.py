@@ -10,6 +10,8 @@ import numpy as np
 
 from ._checks import finite_array, positive
 
+__all__ = ["moving_bump", "rotating_pattern"]
+
 
 def moving_bump(taxels, start, velocity, duration: float, rate_hz: float = 100.0,
                 amplitude: float = 4.0, width: float = 3.0) -> np.ndarray:

@@ -163,3 +163,30 @@ def test_cli_errors_are_one_line(tmp_path):
     r = subprocess.run([str(BIN / "tactile-analyze"), f"run={tmp_path}", "analysis.segmentation.prominence=7"],
                        cwd=tmp_path, capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 2
+
+
+def _results(summary: dict) -> dict:
+    """A summary without what differs between two analyses of the same run (ids, times, config)."""
+    return {k: v for k, v in summary.items() if k not in ("analysis_id", "provenance", "timing", "run")}
+
+
+def test_workers_give_identical_results(runs, tmp_path):
+    """The (window, view) jobs on 1 or 3 threads: the same summary, to the last bit."""
+    one = analyze_run(_copy(runs["straws_sweep"], tmp_path, "one"), {**FAST, "workers": 1}, console=lambda *a: None)
+    many = analyze_run(_copy(runs["straws_sweep"], tmp_path, "many"), {**FAST, "workers": 3}, console=lambda *a: None)
+    assert json.dumps(_results(one), sort_keys=True) == json.dumps(_results(many), sort_keys=True)
+
+
+def test_static_flow_only_where_an_estimate_reads_it(runs, tmp_path):
+    """A sweep's estimates are the same with the static flow in every view (flow.static=all) or
+    only in the slip's evidence views (auto); the other views' static aggregates are then absent."""
+    auto = analyze_run(_copy(runs["straws_sweep"], tmp_path, "auto"), FAST, console=lambda *a: None)
+    full = analyze_run(_copy(runs["straws_sweep"], tmp_path, "all"), {**FAST, "flow": {"static": "all"}},
+                       console=lambda *a: None)
+    assert json.dumps(auto["estimates"], sort_keys=True) == json.dumps(full["estimates"], sort_keys=True)
+    assert [s["slip"] for s in auto["segments"]] == [s["slip"] for s in full["segments"]]
+    during = next(s for s in full["segments"] if s["label"] == "during")
+    assert {"bottom/static", "left/static", "right/static"} <= set(during["flow"])
+    during = next(s for s in auto["segments"] if s["label"] == "during")
+    assert "bottom/static" in during["flow"] and "left/static" not in during["flow"]
+    assert "left/dynamic" in during["flow"]

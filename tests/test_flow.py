@@ -81,8 +81,8 @@ def test_other_flow_methods_agree_on_direction(model, method):
 
 def test_flow_units():
     px = np.ones((2, 4, 4, 2), np.float32)
-    assert np.allclose(flow.to_mm_per_s(px, 0.8, 100.0), 80.0)
-    assert np.allclose(flow.to_mm(px, 0.8), 0.8)
+    assert np.allclose(flow.to_mm_per_s(px, mm_per_px=0.8, rate_hz=100.0), 80.0)
+    assert np.allclose(flow.to_mm(px, mm_per_px=0.8), 0.8)
 
 
 def test_contact_reference_needs_a_settled_contact():
@@ -131,7 +131,7 @@ def test_fused_aggregation_equals_the_matrix_form(rng):
     field = (rng.normal(size=(7, 28, 40, 2)) * 0.1).astype(np.float32)
     field[0] = 0.0
     for noise in (0.05, 0.12):
-        agg = aggregate.aggregate_flow(field, mask, noise)
+        agg = aggregate.aggregate_flow(field, mask, noise=noise)
         sums = field.reshape(7, -1).astype(np.float64) @ aggregate.flow_functionals(mask)
         assert np.allclose(agg.mean, sums[:, :2], rtol=0, atol=1e-7)
         assert np.allclose(agg.divergence, sums[:, 2], rtol=0, atol=1e-7)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tactile import frames, surface, synthetic
+from tactile import _frame_kernels, frames, surface, synthetic
 from tactile.frames import View
 
 
@@ -53,7 +53,7 @@ def test_zbuffer_shows_the_nearest_surface(model):
     """A view that sees both halves must show the half nearer the camera."""
     mesh = model.mesh
     side = np.sign(mesh.local_points[:, 1])                          # −1 on y<0, +1 on y>0
-    plan = frames.make_plan(mesh, View("left_all", look=(0, 1, 0), up=(0, 0, 1), half="all"))
+    plan = frames.make_frame_plan(mesh, View("left_all", look=(0, 1, 0), up=(0, 0, 1), half="all"))
     img = frames.render(plan, mesh, side[None], scale=0.0)[0]
     inner = plan.mask & (np.abs(img) > 0)
     assert np.mean(img[inner] < 0) > 0.97                             # the y<0 half is in front
@@ -87,9 +87,9 @@ def test_default_views_axes():
 
 def test_bad_frame_input(model):
     with pytest.raises(ValueError, match="size"):
-        frames.make_plan(model.mesh, frames.DEFAULT_VIEWS["bottom"], size=(4, 32))
+        frames.make_frame_plan(model.mesh, frames.DEFAULT_VIEWS["bottom"], size=(4, 32))
     with pytest.raises(ValueError, match="too small"):
-        frames.make_plan(model.mesh, frames.DEFAULT_VIEWS["bottom"], size=(16, 16), mm_per_px=0.2)
+        frames.make_frame_plan(model.mesh, frames.DEFAULT_VIEWS["bottom"], size=(16, 16), mm_per_px=0.2)
     with pytest.raises(ValueError, match="up"):
         frames.view_axes(View("bad", look=(0, 0, 1), up=(0, 0, 2)))
     with pytest.raises(ValueError, match="values"):
@@ -143,7 +143,7 @@ def test_mesh_walk_is_used_for_a_sliding_contact(model, rng):
 def test_walk_index_topology(model):
     for plan in model.plans.values():
         nb, n_tri = plan.walk.neighbours, len(plan.triangles)
-        inner = nb != frames._NONE
+        inner = nb != _frame_kernels._NONE
         # Neighbourhood is symmetric and neighbours share the edge opposite the corner.
         for f, k in zip(*np.nonzero(inner)):
             g = nb[f, k]
@@ -151,7 +151,7 @@ def test_walk_index_topology(model):
             edge = {plan.triangles[f, (k + 1) % 3], plan.triangles[f, (k + 2) % 3]}
             assert edge <= set(plan.triangles[g])
         assert (~inner).sum() == len(plan.walk.boundary) and nb[inner].max() < n_tri
-    both = frames.make_plan(model.mesh, View("left_all", look=(0, 1, 0), up=(0, 0, 1), half="all"))
+    both = frames.make_frame_plan(model.mesh, View("left_all", look=(0, 1, 0), up=(0, 0, 1), half="all"))
     assert both.walk is None                                          # faces the camera both ways
 
 

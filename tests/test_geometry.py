@@ -10,7 +10,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from tactile import geometry
+from tactile import geodesic_cache, geometry
 from tactile.geometry import (
     EllipsoidFit, cached_geodesic_distances, ellipsoid_angles, ellipsoid_normals,
     ellipsoid_points, fit_ellipsoid, geodesic_distances, geodesic_path, kernel_weights,
@@ -317,7 +317,7 @@ def test_cache_hit_skips_computation(tmp_path, pair_sets, monkeypatch):
     def fail(*args, **kwargs):
         raise AssertionError("recomputed despite a valid cache file")
 
-    monkeypatch.setattr(geometry, "geodesic_distances", fail)
+    monkeypatch.setattr(geodesic_cache, "geodesic_distances", fail)
     again = cached_geodesic_distances(AXES, pa, pb, cache_dir=tmp_path)
     np.testing.assert_array_equal(again, first)
     assert [p.suffix for p in tmp_path.iterdir()] == [".npz"]  # no temporary files left

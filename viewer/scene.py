@@ -34,7 +34,7 @@ from analysis.config import AnalysisConfigError, load_config
 from analysis.flows import MIN_PEAK_KOHM
 from analysis.load import AnalysisInputError, RunData, load_run
 from analysis.pipeline import get_model
-from analysis.preprocess import Prepared, prepare
+from analysis.preprocess import PreparedRun, prepare
 from tactile.aggregate import aggregate_flow
 from tactile.flow import FlowEstimator
 
@@ -80,7 +80,7 @@ class Scene:
 
     Attributes:
         run_dir: the run directory.  run: :class:`analysis.load.RunData`.
-        prepared: the analysis' activation and pressure (:class:`analysis.preprocess.Prepared`).
+        prepared: the analysis' activation and pressure (:class:`analysis.preprocess.PreparedRun`).
         model: the :class:`tactile.pipeline.TactileModel` of the run's analysis config.
         noise: the flow's still level, px/frame.
         shown: (N,) indices into ``run.time`` of the frames shown (images, flow, fingertip colours).
@@ -100,7 +100,7 @@ class Scene:
 
     run_dir: Path
     run: RunData
-    prepared: Prepared
+    prepared: PreparedRun
     model: object
     noise: float
     shown: np.ndarray
@@ -172,7 +172,7 @@ def load_scene(run_dir, fps: float = DEFAULT_FPS) -> Scene:
                  pour=groups.get("pour"), live=groups.get("live"), fingertips=fingertips, notes=notes)
 
 
-def intensity_ranges(run: RunData, prepared: Prepared, cfg, contacts: dict | None, notes: list) -> np.ndarray:
+def intensity_ranges(run: RunData, prepared: PreparedRun, cfg, contacts: dict | None, notes: list) -> np.ndarray:
     """(T, F, 2) the intensity range of every frame and finger, as the analysis renders it: the
     fixed ``cfg.tactile.intensity_range``, or with ``cfg.intensity == "contact"`` (0, the
     window's peak activation, at least :data:`analysis.flows.MIN_PEAK_KOHM`) over each contact
@@ -256,7 +256,7 @@ def tactile_tracks(scene: Scene, fingers=None) -> list[TactileTrack]:
             for j, (prev, cur) in enumerate(both):
                 if not np.array_equal(prev, cur):
                     field[j] = estimate(prev, cur)
-            agg = aggregate_flow(field, plan.mask, scene.noise)
+            agg = aggregate_flow(field, plan.mask, noise=scene.noise)
             grid = draw.arrow_grid(plan.mask, ARROW_SPACING)
             out.append(TactileTrack(finger, view, both[:, 1].copy(), draw.sample_field(field, grid), grid,
                                     agg.mean, agg.magnitude, agg.direction, agg.confidence))

@@ -1,0 +1,182 @@
+"""Speed figures of issue 15 as JSON lines (min and median of several runs, paired ratios).
+
+    python benchmarks/bench_speed.py [--repeat 3] [--only analysis,workers,startup,dis] [--keep DIR]
+
+- ``analysis``: CPU of ``analyze_run`` (one worker, figures on) of the 60 s five-finger store
+  of ``bench_analysis.py`` against the bare dynamic Farnebäck calls on the same frames, each
+  repetition paired (ratio = analysis CPU / bare flow CPU); the figures' CPU alone.
+- ``workers``: wall time of the same analysis (figures off) with 1, 2, … the cores available.
+- ``startup``: ``tactile-run --help`` and ``tactile-analyze --help`` (wall and CPU of the child).
+- ``dis``: each flow method / DIS preset on a simulated straws sweep and pour: flow CPU and the
+  scores that the presets move (sweep direction error, pour phase onsets).
+CPU is ``time.process_time`` (every thread of the process); the machine's other load shows in
+the spread between min and median.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+BIN = Path(sys.executable).parent
+QUIET = lambda *a: None  # noqa: E731
+
+
+def stats(name: str, values: list[float], **extra) -> dict:
+    return {"bench": name, "n": len(values), "min": round(min(values), 4),
+            "median": round(statistics.median(values), 4), **extra}
+
+
+def emit(row: dict) -> None:
+    print(json.dumps(row), flush=True)
+
+
+def fresh(store: Path, work: Path, name: str) -> Path:
+    d = work / name
+    shutil.rmtree(d, ignore_errors=True)
+    d.mkdir(parents=True)
+    shutil.copytree(store, d / "run.zarr")
+    return d / "run.zarr"
+
+
+def bare_dynamic_cpu(store: Path, cfg) -> float:
+    """CPU of Farnebäck between consecutive frames of every (window, view) the analysis renders."""
+    from analysis.load import load_run
+    from analysis.pipeline import analyse, get_model
+    from tactile.flow import FlowEstimator
+    a = analyse(load_run(store), cfg, get_model(cfg.tactile))
+    est = FlowEstimator(cfg.tactile.flow)
+    frames = [vr.frames for cf in a.flows for vr in cf.views.values()]
+    t0 = time.process_time()
+    for fr in frames:
+        for t in range(1, len(fr)):
+            est(fr[t - 1], fr[t])
+    return time.process_time() - t0
+
+
+def bench_analysis(store: Path, work: Path, repeat: int) -> None:
+    from analysis import figures
+    from analysis.config import load_config
+    from analysis.load import load_run
+    from analysis.pipeline import analyse, get_model
+    from analysis.run import analyze_run
+    cfg = load_config({"progress": False, "workers": 1})
+    get_model(cfg.tactile)
+    analyze_run(fresh(store, work, "warm"), {"progress": False, "figures": False}, console=QUIET)   # numba, caches
+    full, bare, ratio, figs = [], [], [], []
+    for i in range(repeat):
+        t0 = time.process_time()
+        analyze_run(fresh(store, work, f"a{i}"), {"progress": False, "workers": 1, "figures": True}, console=QUIET)
+        full.append(time.process_time() - t0)
+        bare.append(bare_dynamic_cpu(store, cfg))
+        ratio.append(full[-1] / bare[-1])
+        a = analyse(load_run(store), cfg, get_model(cfg.tactile))
+        t0 = time.process_time()
+        figures.make_all(a, get_model(cfg.tactile), work / f"f{i}", cfg)
+        figs.append(time.process_time() - t0)
+    emit(stats("analysis_cpu_s", full, workers=1, figures=True, record="60 s, 5 fingers"))
+    emit(stats("bare_dynamic_farneback_cpu_s", bare))
+    emit(stats("analysis_over_bare_dynamic_ratio", ratio, paired=True, target=1.3))
+    emit(stats("figures_cpu_s", figs))
+
+
+def bench_workers(store: Path, work: Path, repeat: int) -> None:
+    from analysis.flows import available_workers
+    from analysis.run import analyze_run
+    cores = available_workers()
+    walls = {}
+    for w in sorted({1, *range(2, cores + 1)}):
+        walls[w] = []
+        for i in range(repeat):
+            s = fresh(store, work, f"w{w}_{i}")
+            t0 = time.perf_counter()
+            analyze_run(s, {"progress": False, "figures": False, "workers": w}, console=QUIET)
+            walls[w].append(time.perf_counter() - t0)
+        emit(stats("analysis_wall_s", walls[w], workers=w, cores=cores,
+                   speedup_median=round(statistics.median(walls[1]) / statistics.median(walls[w]), 3)))
+
+
+def _child(cmd: list[str]) -> tuple[float, float]:
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, capture_output=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def bench_startup(repeat: int) -> None:
+    for cmd in ("tactile-run", "tactile-analyze"):
+        runs = [_child([str(BIN / cmd), "--help"]) for _ in range(max(repeat, 5))]
+        emit(stats(f"{cmd}_help_wall_s", [w for w, _ in runs], target=0.5))
+        emit(stats(f"{cmd}_help_cpu_s", [c for _, c in runs]))
+        r = subprocess.run([sys.executable, "-X", "importtime", "-c", f"import {'protocols' if cmd == 'tactile-run' else 'analysis'}.cli"],
+                           capture_output=True, text=True)
+        total = int(r.stderr.strip().splitlines()[-1].split("|")[1])
+        emit({"bench": f"{cmd}_import_s", "value": round(total / 1e6, 4)})
+
+
+def simulated(protocol: str, work: Path) -> Path:
+    d = work / f"sim_{protocol}"
+    if not (d / "run.zarr").exists():
+        subprocess.run([str(BIN / "tactile-run"), f"protocol={protocol}", "analyze=false", "progress=false",
+                        f"hydra.run.dir={d}"], check=True, capture_output=True, cwd=work)
+    return d / "run.zarr"
+
+
+def bench_dis(work: Path) -> None:
+    from analysis.run import analyze_run
+    methods = [("farneback", {}), *((f"dis_{p}", {"method": "dis", "dis_preset": p})
+                                    for p in ("ultrafast", "fast", "medium"))]
+    for protocol in ("straws_sweep", "pour_grasp"):
+        store = simulated(protocol, work)
+        for name, flow in methods:
+            s = analyze_run(fresh(store, work, f"dis_{protocol}_{name}"),
+                            {"progress": False, "figures": False, "workers": 1, "flow": flow}, console=QUIET)
+            score = json.loads((work / f"dis_{protocol}_{name}" / "score.json").read_text())
+            keep = ("direction_error_deg_max", "width_error_mm_median", "boundary_error_ms_max", "pour_phase_error_ms_max")
+            emit({"bench": "flow_method", "protocol": protocol, "method": name, "flow_s": round(s["timing"]["flow_s"], 3),
+                  **{k: score["summary"].get(k) for k in keep},
+                  "rotation_error_ms": score.get("pour", {}).get("rotation", {}).get("error_ms"),
+                  "all_targets_met": score.get("all_targets_met")})
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--only", default="analysis,workers,startup,dis")
+    ap.add_argument("--keep", help="work directory to keep (default: a temporary one)")
+    args = ap.parse_args()
+    parts = set(args.only.split(","))
+    work = Path(args.keep or tempfile.mkdtemp(prefix="bench-speed-"))
+    work.mkdir(parents=True, exist_ok=True)
+    if "startup" in parts:
+        bench_startup(args.repeat)
+    if parts & {"analysis", "workers"}:
+        from bench_analysis import make_store
+        store = work / "bench" / "run.zarr"
+        if not store.exists():
+            store = make_store(work)
+        if "analysis" in parts:
+            bench_analysis(store, work, args.repeat)
+        if "workers" in parts:
+            bench_workers(store, work, args.repeat)
+    if "dis" in parts:
+        bench_dis(work)
+    if not args.keep:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONWARNINGS", "ignore")
+    main()
