@@ -21,12 +21,14 @@ from .config_guard import install
 BAD_INPUT, INTERRUPTED = ExitCode.BAD_INPUT, ExitCode.INTERRUPTED
 
 
-def run_app(app, argv=None) -> None:
+def run_app(app, argv=None, step_fields=None) -> None:
     """Run a ``@hydra.main`` app behind the guard: a config the guard or Hydra refuses (an
     unknown key, bad YAML, a protocol setting ``hydra.*``...) is one line on stderr naming
     it and exit status 2; ``verbose=true`` on the command line adds the traceback. SIGTERM
     is Ctrl-C (the apps' jobs own both while they write); one outside a job ends the
-    process with one line and exit status 3; once the app is done, both are ignored."""
+    process with one line and exit status 3; once the app is done, both are ignored.
+    ``step_fields(kind)``: the parameters of a step kind (or None), for the "did you mean" of
+    a misspelt step key (``cliapp`` stands below ``protocols`` and cannot ask it)."""
     argv = sys.argv[1:] if argv is None else argv
     os.environ["HYDRA_FULL_ERROR"] = "1"         # Hydra raises instead of printing several lines
     if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
@@ -40,7 +42,7 @@ def run_app(app, argv=None) -> None:
     except Exception as exc:
         if "verbose=true" in argv:
             traceback.print_exception(exc)
-        print(f"error: {error_line(exc)}", file=sys.stderr)
+        print(f"error: {error_line(exc, step_fields)}", file=sys.stderr)
         sys.exit(BAD_INPUT)
     finally:
         for s in (signal.SIGINT, signal.SIGTERM):   # the app is done: a late signal must not turn
@@ -54,7 +56,7 @@ def report(exc: BaseException, what: str, verbose: bool = False) -> None:
     print(f"{what}: {exc}", file=sys.stderr)
 
 
-def error_line(exc: BaseException) -> str:
+def error_line(exc: BaseException, step_fields=None) -> str:
     """An exception and its cause as one line (Hydra's messages span several). An override
     of a key that does not exist is named with the nearest known key, in place of Hydra's
     hint to add it with ``+`` (which :func:`protocols.schema.check_config` would refuse)."""
@@ -62,7 +64,7 @@ def error_line(exc: BaseException) -> str:
     if "Could not override" in str(exc) and getattr(cause, "parent_node", None) is not None \
             and isinstance(getattr(cause, "key", None), str) and getattr(cause, "full_key", None):
         parent = cause.full_key[:-len(cause.key)].rstrip(".")
-        return str(unknown_key(parent, cause.key, _known_keys(parent, cause.parent_node.keys())))
+        return str(unknown_key(parent, cause.key, _known_keys(parent, cause.parent_node.keys(), step_fields)))
     missing = re.search(r"Could not find '([\w/]+)/([^']+)'", str(exc))
     if missing:                                   # a group option that does not exist
         group, name = missing.groups()
@@ -78,14 +80,9 @@ def error_line(exc: BaseException) -> str:
     return "; ".join(line.strip() for part in parts for line in part.splitlines() if line.strip())
 
 
-def _known_keys(parent: str, composed) -> list[str]:
-    """The keys a node may have: a step's parameters for ``...steps[i].<kind>``, else the
-    keys the composed node has."""
+def _known_keys(parent: str, composed, step_fields=None) -> list[str]:
+    """The keys a node may have: a step's parameters for ``...steps[i].<kind>`` (when
+    ``step_fields`` knows the kind), else the keys the composed node has."""
     step = re.search(r"steps\[\d+\]\.(\w+)$", parent)
-    if step:
-        from dataclasses import fields
-
-        from .steps import STEP_KINDS
-        if step.group(1) in STEP_KINDS:
-            return [f.name for f in fields(STEP_KINDS[step.group(1)]) if f.name != "key"]
-    return list(composed)
+    known = step_fields(step.group(1)) if step and step_fields is not None else None
+    return list(known) if known is not None else list(composed)

@@ -135,6 +135,16 @@ def _refuse_parallel_hardware(cfg, hc) -> None:
                          f"default sequential launcher")
 
 
+def step_fields(kind: str) -> list[str] | None:
+    """The parameters of step kind ``kind`` (None for an unknown kind), for the one-line
+    error on a misspelt step key."""
+    from dataclasses import fields
+
+    from .steps import STEP_KINDS                 # the step registry: imported only on an error
+    cls = STEP_KINDS.get(kind)
+    return None if cls is None else [f.name for f in fields(cls) if f.name != "key"]
+
+
 @hydra.main(config_path=str(CONF_DIR), config_name="config", version_base=None)
 def _app(cfg) -> None:
     _exit["code"] = max(_exit["code"], run_job(cfg))
@@ -148,7 +158,7 @@ def main() -> None:
     register()
     logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
     _interrupts.install()                    # the run owns Ctrl-C and SIGTERM (protocols.interrupts)
-    run_app(_app)                            # protocols are data: no Hydra settings, no code
+    run_app(_app, step_fields=step_fields)   # protocols are data: no Hydra settings, no code
     sys.exit(_exit["code"])
 
 

@@ -97,3 +97,29 @@ def test_importing_a_package_loads_nothing_above_it():
                              cwd=ROOT, capture_output=True, text=True, check=True).stdout
         loaded = set(json.loads(out)) - {package}
         assert loaded <= allowed, f"import {package} loads {sorted(loaded - allowed)}"
+
+
+def _module_exists(name: str) -> bool:
+    path = ROOT / name.replace(".", "/")
+    return path.with_suffix(".py").exists() or (path / "__init__.py").exists()
+
+
+@pytest.mark.parametrize("package", sorted(ALLOWED))
+def test_every_import_of_the_project_names_a_module_that_exists(package):
+    """Imports inside functions run only on their path (an error, an emulator's option): a
+    module that moved must not leave one behind pointing at its old place."""
+    bad = []
+    for module, path in modules(package):
+        base = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom):
+                target = ".".join(base.split(".")[: len(base.split(".")) - node.level + 1] + [node.module or ""]) \
+                    .rstrip(".") if node.level else node.module
+                names = [target]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            else:
+                continue
+            bad += [f"{path.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names
+                    if n.split(".")[0] in ALLOWED and not _module_exists(n)]
+    assert not bad, "\n".join(bad)

@@ -71,7 +71,7 @@ class EmulatedTouch:
         from omegaconf import OmegaConf
 
         from ..config import load_config
-        from ..sim.surfaces import load_surface
+        from ..surfaces import load_surface
         from ..sim.world import SimWorld
 
         path = SURFACES_DIR / f"{surface}.yaml"
