@@ -1,6 +1,6 @@
 """Peak memory and wall time of ``tactile-analyze`` on an N-hour five-finger import (JSON lines).
 
-    python benchmarks/bench_long_analysis.py [--hours 0.5 1 2 8] [--press-every 120] [--keep DIR]
+    python benchmarks/bench_long_analysis.py [--hours 0.5 1 2 8] [--press-every 120] [--stages] [--keep DIR]
 
 The record: the real resting bag ``tests/data/biotac_rest_untouched.bag`` (100 Hz; its two
 unconnected fingers get a connected finger's data, so five fingers rest) tiled end to end to N hours, with a 2 s press on one finger every ``--press-every`` s (the fingers
@@ -9,8 +9,9 @@ taxels, PDC rises by ~200 counts. It is written through the importer's own strea
 (:func:`importers.writer.write_import_store`, one chunk in memory), so the store is what
 ``tactile-import`` would write for such a bag. Then ``tactile-analyze run=RUN_DIR/run.zarr`` runs in a child
 process; its peak resident memory (``ru_maxrss`` of the child) and wall time are printed, one
-JSON line per length. The curve is what issue 13 item 15 asks about: today it grows with the
-hours (MemoryError at 8 h on a 2.93 M-row import); streamed, it should stay flat.
+JSON line per length; ``--stages`` adds what each stage holds and peaks at (tracemalloc, in this
+process; ``analyse`` runs ``prepare`` again inside). The curve is what issue 13 item 15 asks
+about: today it grows with the hours (MemoryError at 8 h on a 2.93 M-row import); streamed, it should stay flat.
 """
 
 from __future__ import annotations
@@ -116,10 +117,38 @@ def analyse_child(run_dir: Path) -> dict:
             "stderr_tail": tail if p.returncode else []}
 
 
+def stage_memory(store: Path) -> dict:
+    """Where the memory goes, in this process (tracemalloc, MB): what ``load_run``,
+    ``preprocess.prepare`` and ``pipeline.analyse`` each hold after and peak at."""
+    import tracemalloc
+
+    from analysis.config import load_config
+    from analysis.load import load_run
+    from analysis.pipeline import analyse, get_model
+    from analysis.preprocess import prepare
+    cfg = load_config({"progress": False})
+    model = get_model(cfg.tactile)
+    out = {}
+    tracemalloc.start()
+    for name, step in (("load_run", lambda: load_run(store)), ("prepare", lambda: prepare(run, cfg, model)),
+                       ("analyse", lambda: analyse(run, cfg, model))):
+        tracemalloc.reset_peak()
+        result = step()
+        if name == "load_run":
+            run = result
+        held, peak = tracemalloc.get_traced_memory()
+        out[name] = {"held_mb": round(held / 1e6), "peak_mb": round(peak / 1e6)}
+        del result
+    tracemalloc.stop()
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, nargs="+", default=[0.5, 1, 2, 8])
     ap.add_argument("--press-every", type=float, default=120.0, help="s between presses (fingers in turn)")
+    ap.add_argument("--stages", action="store_true",
+                    help="also trace the memory of load_run / prepare / analyse in this process")
     ap.add_argument("--keep", help="work directory to keep (default: a temporary one, removed)")
     args = ap.parse_args()
     work = Path(args.keep or tempfile.mkdtemp(prefix="bench-long-"))
@@ -131,6 +160,8 @@ def main() -> None:
         frames = int(round(hours * 3600 * RATE_HZ))
         out = {"hours": hours, "frames": frames, "finger_frames": frames * 5, "write_s": round(write_s, 1),
                **analyse_child(run_dir), "store": str(store) if args.keep else None}
+        if args.stages:
+            out["stages"] = stage_memory(store)
         print(json.dumps(out), flush=True)
         if not args.keep:
             subprocess.run(["rm", "-rf", str(run_dir)], check=False)
