@@ -17,7 +17,7 @@ from tactile import signals
 
 from . import estimates as est
 from . import flows as fl
-from . import labels as lab
+from . import labels as labelling
 from . import segments as seg
 from . import slip as slp
 from .load import RunData
@@ -48,7 +48,7 @@ class Analysis:
     thresholds: dict                     # finger → pressure threshold
     extrema: dict                        # finger → seg.Extrema
     bumps: dict                          # finger → [[Bump per contact]]
-    segments: list                       # [lab.Segment] with ids
+    segments: list                       # [labelling.Segment] with ids
     skipped: list                        # [{"what", "finger", "reason", ...}]
     aggregates: list                     # rows: segment id, view, kind, values
     crossings: list                      # sweep estimates per crossing
@@ -73,7 +73,7 @@ def static_views(cfg, scheme: str) -> tuple[str, ...]:
     views, which get it from every reference): every view with ``analysis.flow.static=all`` and
     for a pour (its rotation phase is the static rotation averaged over the views); none
     otherwise: no sweep or generic estimate reads it."""
-    if cfg.static_flow == "all" or scheme == lab.POUR:
+    if cfg.static_flow == "all" or scheme == labelling.POUR:
         return tuple(cfg.views)
     return ()
 
@@ -109,7 +109,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
                         "reason": "electrodes outside 1..4094 counts in these frames: bridged by interpolation"})
     for d in run.dropped:
         skipped.append({**d, "what": f"{d['frames']} {d['what']}"})
-    scheme = lab.scheme(run.labels)
+    scheme = labelling.scheme(run.labels)
     method = contact_method(prepared, cfg)
     signal = np.zeros_like(prepared.pressure)
     contacts, thresholds, extrema, bumps = {}, {}, {}, {}
@@ -134,7 +134,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
         bumps[f] = [seg.bumps(p, iv, extrema[f].peaks, s.plateau_level) for iv in ivs]
     if not contacts:
         skipped.append({"what": "run", "reason": "no finger in contact at any time: no segments, no flow"})
-    if scheme == lab.SWEEP:
+    if scheme == labelling.SWEEP:
         # the 'during' plateau is measured on the width signal, so that the segment and the
         # width estimate (plateau duration x speed) describe the same stretch
         wsig = prepared.proxy if cfg.estimates.width_signal == "proxy" else prepared.pressure
@@ -155,16 +155,16 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
                                workers=cfg.workers or fl.available_workers())
     t_flow = _time.perf_counter()
 
-    segments: list[lab.Segment] = []
+    segments: list[labelling.Segment] = []
     pour: dict = {}
-    if scheme == lab.SWEEP:
+    if scheme == labelling.SWEEP:
         for f, ivs in contacts.items():
-            segments += lab.sweep_segments(f, T, ivs, bumps[f])
-    elif scheme == lab.POUR:
+            segments += labelling.sweep_segments(f, T, ivs, bumps[f])
+    elif scheme == labelling.POUR:
         pour = _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin)
     else:
         for f, ivs in contacts.items():
-            segments += lab.generic_segments(f, T, ivs, run.labels)
+            segments += labelling.generic_segments(f, T, ivs, run.labels)
     kept = []
     for sg in segments:
         if sg.frames() < 2:
@@ -184,7 +184,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
                             prepared.activation[:, run.fingers.index(sg.finger)], sg.start, sg.stop, model, cfg.slip)
         if est_ is not None:
             slips[sg.id] = est_
-    crossings = _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) if scheme == lab.SWEEP else []
+    crossings = _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) if scheme == labelling.SWEEP else []
     whole = _whole_run(flows, model, rate)
     t_end = _time.perf_counter()
     timing = {"prepare_s": t_prep - t_start, "flow_s": flow_s, "flow_stage_s": t_flow - t_prep,
@@ -354,15 +354,15 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
             # back over the slip's fall, so the slip is dated on the causal (filter-only) proxy
             tc = cfg.tactile
             fast = signals.kalman_filter(prepared.raw_activation[:, k], R=tc.kalman_r, Q=tc.kalman_q).sum(axis=-1)
-        ph = lab.pour_phases(run.time, p, (a, b), ref, rot, pour_event, cfg.pour.rotation_rad,
+        ph = labelling.pour_phases(run.time, p, (a, b), ref, rot, pour_event, cfg.pour.rotation_rad,
                              cfg.pour.trough_prominence, int(round(cfg.segmentation.distance_s * rate)),
                              cfg.segmentation.plateau_level, fast=fast, reaction=reaction)
         for name, why in ph.reasons.items():
             skipped.append({"what": f"phase {name}", "finger": f, "reason": why})
-        segments += lab.pour_segments(f, len(run.time), ph, (a, b), ci, margin)
+        segments += labelling.pour_segments(f, len(run.time), ph, (a, b), ci, margin)
         per_finger[f] = {n: (float(run.time[i]) if i is not None else None) for n, i in ph.onsets.items()}
     overall = {}
-    for n in lab.POUR_PHASES:
+    for n in labelling.POUR_PHASES:
         vals = [v[n] for v in per_finger.values() if v.get(n) is not None]
         overall[n] = float(np.median(vals)) if vals else None
     return {"onsets": overall, "per_finger": per_finger,

@@ -37,7 +37,7 @@ import math
 import numpy as np
 
 from . import estimates as est
-from . import labels as lab
+from . import labels as labelling
 
 TARGETS = {"direction_correct_fraction": 1.0, "width_error_mm_median": 1.0, "boundary_error_mm_median": 0.75,
            "boundary_error_ms_median": 50.0, "slip_onset_error_ms": 100.0, "pour_phase_error_ms_max": 500.0}
@@ -60,7 +60,7 @@ def score(analysis, truth: dict) -> dict:
     out = {"crossings": [], "pour": {}, "summary": {}, "targets": {}}
     # crossings are scored only where the protocol declared a sweep: a finger pressed on a
     # cylinder or a bump crosses nothing it means to measure
-    fc = truth.get("feature_crossings", {}) if analysis.scheme == lab.SWEEP else {}
+    fc = truth.get("feature_crossings", {}) if analysis.scheme == labelling.SWEEP else {}
     feats = truth.get("features", {})
     sweeps = truth.get("sweeps", {})
     contacts = truth.get("contacts", {})

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from analysis import labels as lab
+from analysis import labels as labelling
 from analysis import segments as seg
 from analysis.config import AnalysisConfigError, load_config
 
@@ -67,7 +67,7 @@ def test_sweep_labels_cover_each_bump():
     t, p = bump_train([3.0, 6.0], 1.0, 300)
     ivs = seg.contact_intervals(p, 3.0, RATE)
     ex = seg.extrema(p, RATE, 20.0, 0.5)
-    segs = lab.sweep_segments("ff", len(p), ivs, [seg.bumps(p, iv, ex.peaks) for iv in ivs])
+    segs = labelling.sweep_segments("ff", len(p), ivs, [seg.bumps(p, iv, ex.peaks) for iv in ivs])
     labels = [s.label for s in segs]
     assert labels == ["approach", "before", "during", "after", "before", "during", "after", "lift"]
     for s in segs:
@@ -86,7 +86,7 @@ def test_pour_phases_from_a_made_up_grasp():
     p = np.where((t > 1) & (t < 35), 4 + 0.05 * (t - 1), 0.0)
     p = np.where((t > 20) & (t < 35), p.max() - 0.02 * (t - 20) * 0 - 0.05 * (t - 20), p)
     rot = np.where(t > 12, 0.02 * (t - 12), 0.0)
-    ph = lab.pour_phases(t, p, (101, 3500), 110, rot, 200, 0.03, 0.15, 50)
+    ph = labelling.pour_phases(t, p, (101, 3500), 110, rot, 200, 0.03, 0.15, 50)
     on = {k: (None if v is None else t[v]) for k, v in ph.onsets.items()}
     assert on["pour"] == pytest.approx(2.0)
     assert on["rotation"] == pytest.approx(12.0, abs=0.1)

@@ -7,17 +7,17 @@ import sys
 
 import pytest
 
-from analysis import labels as lab
+from analysis import labels as labelling
 from analysis.run import score_line
 
 
 def test_generic_segments_carry_only_the_declared_labels():
     contacts = [(10, 40), (60, 80)]
-    own = [s.label for s in lab.generic_segments("ff", 100, contacts, ["approach", "contact", "lift"])]
+    own = [s.label for s in labelling.generic_segments("ff", 100, contacts, ["approach", "contact", "lift"])]
     assert own == ["approach", "contact", "no_contact", "contact", "lift"]
-    imported = [s.label for s in lab.generic_segments("ff", 100, contacts, [])]
+    imported = [s.label for s in labelling.generic_segments("ff", 100, contacts, [])]
     assert imported == ["no_contact", "contact", "no_contact", "contact", "no_contact", "all"]
-    assert "all" in [s.label for s in lab.generic_segments("ff", 100, contacts, ["contact", "all"])]
+    assert "all" in [s.label for s in labelling.generic_segments("ff", 100, contacts, ["contact", "all"])]
 
 
 def test_a_score_line_names_the_failed_targets_and_by_how_much():
