@@ -200,3 +200,13 @@ def test_the_live_line_shows_under_the_progress_bars_on_a_terminal():
     bar.close()
     screen.close()
     assert ProgressConsole(SimpleNamespace(isatty=lambda: False)).live_line() is None   # a pipe: bars only
+
+
+@pytest.mark.slow
+def test_a_simulated_sweep_runs_on_the_joblib_launcher(tmp_path):
+    proc = command("tactile-run", "-m", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", "analyze=false",
+                   "progress=false", "protocol.sweep_speed=10,20", cwd=tmp_path, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    [summary] = tmp_path.glob("multirun/*/*/summary.csv")
+    rows = summary.read_text().splitlines()[1:]
+    assert len(rows) == 2 and all(",success," in r for r in rows), rows

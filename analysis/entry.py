@@ -1,0 +1,19 @@
+"""The ``tactile-analyze`` entry point: ``--help`` / ``-h`` is answered before Hydra and the app
+are imported (:mod:`cliapp.quick_help`); everything else goes to :func:`analysis.cli.main`."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from cliapp.quick_help import help_text, wants_help
+
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+
+
+def main() -> None:
+    if wants_help(sys.argv[1:]):
+        print(help_text(CONF_DIR, "analyze"))
+        sys.exit(0)
+    from .cli import main as analyze
+    analyze()

@@ -1,0 +1,24 @@
+"""The ``tactile-run`` entry point: ``--help`` / ``-h`` and ``--list`` are answered before Hydra
+and the app are imported (:mod:`cliapp.quick_help`); everything else goes to :func:`protocols.cli.main`."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from cliapp.quick_help import help_text, wants_help
+
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+
+
+def main() -> None:
+    argv = sys.argv[1:]
+    if wants_help(argv):
+        print(help_text(CONF_DIR, "config"))
+        sys.exit(0)
+    if argv in (["--list"], ["list"]):                 # what there is to run, one line each
+        from .listing import listing
+        print(listing(CONF_DIR))
+        sys.exit(0)
+    from .cli import main as run
+    run()
