@@ -113,8 +113,19 @@ def _app(cfg) -> None:
     _state["code"] = max(_state["code"], analyse_paths(str(run), cfg.analysis, bool(cfg.get("verbose"))))
 
 
+def _refuse_glob(argv: list[str]) -> None:
+    """Hydra's ``glob(...)`` picks among a key's config options, not files: ``run=glob(...)``
+    would sweep over nothing and exit 0. Refuse it with the forms that do what was meant."""
+    for arg in argv:
+        if arg.lstrip("+").startswith("run=glob("):
+            print(f"error: {arg}: Hydra's glob() selects config options, not files; give the runs as "
+                  f"-m run=A,B, or a directory: run=DIR analyses every run.zarr below it", file=sys.stderr)
+            sys.exit(BAD_INPUT)
+
+
 def main() -> None:
     from cliapp.runner import run_app
+    _refuse_glob(sys.argv[1:])
     run_app(_app)                   # a config file is data: one line for a bad one, exit 2
     sys.exit(_state["code"])
 

@@ -75,6 +75,7 @@ def test_gitignore_covers_the_output_roots():
     ("tactile-run", ["protocol.sweep_sped=10"], "did you mean `sweep_speed`?"),
     ("tactile-analyze", ["run=x", "analysis.flow.methd=dis"], "did you mean `method`?"),
     ("tactile-analyze", [], "run: expected run=PATH"),
+    ("tactile-analyze", ["-m", "run=glob(outputs/*/*)"], "glob() selects config options, not files"),
     ("tactile-import", [], "source: missing; expected source=PATH"),
     ("tactile-import", ["sorce=a.bag"], "did you mean `source`?"),
     ("tactile-recover", [], "the following arguments are required: paths"),
