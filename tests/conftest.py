@@ -1,3 +1,4 @@
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -84,3 +85,18 @@ class EventLog:
 
     def kinds(self):
         return [k for k, _, _ in self.events]
+
+
+@contextmanager
+def tmpfs(mount: Path, size: str):
+    """A tmpfs of ``size`` (mount's syntax: ``3m``, ``2900k``) mounted at ``mount``: a small disk
+    that fills up for real (the tests run as root, as CI does; otherwise they are skipped)."""
+    import subprocess
+    mount.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mount)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("needs root to mount a small tmpfs")
+    try:
+        yield mount
+    finally:
+        subprocess.run(["umount", "-l", str(mount)], capture_output=True)

@@ -14,6 +14,8 @@ import pytest
 import xarray as xr
 from hydra import compose, initialize_config_dir
 
+from conftest import tmpfs
+
 from hardware.sim import make_sim_lab
 from protocols.engine import FAILED, RunEngine
 from protocols.plan import make_plan
@@ -72,13 +74,8 @@ def test_an_exception_inside_a_step_fails_the_run_with_the_error_recorded(tmp_pa
 
 @pytest.fixture
 def small_disk(tmp_path):
-    mount = tmp_path / "disk"
-    mount.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(mount)],
-                      capture_output=True).returncode != 0:
-        pytest.skip("needs root to mount a small tmpfs")
-    yield mount
-    subprocess.run(["umount", "-l", str(mount)], capture_output=True)
+    with tmpfs(tmp_path / "disk", "3m") as mount:
+        yield mount
 
 
 @pytest.mark.slow
@@ -111,13 +108,8 @@ def test_a_full_disk_stops_the_run_and_keeps_what_was_committed(tmp_path, small_
 
 @pytest.fixture
 def tiny_disk(tmp_path):
-    mount = tmp_path / "tiny"
-    mount.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(mount)],
-                      capture_output=True).returncode != 0:
-        pytest.skip("needs root to mount a small tmpfs")
-    yield mount
-    subprocess.run(["umount", "-l", str(mount)], capture_output=True)
+    with tmpfs(tmp_path / "tiny", "1m") as mount:
+        yield mount
 
 
 @pytest.mark.slow

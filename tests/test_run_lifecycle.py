@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from conftest import tmpfs
 from runstore import rundir
 from protocols.interrupts import Interrupts
 from runstore.recover import main as recover_main
@@ -203,13 +204,8 @@ def test_a_second_tactile_run_on_the_same_directory_is_refused_and_leaves_the_fi
 # ----------------------------------------------------------------------------- item 14: analysis fails
 @pytest.fixture
 def small_disk(tmp_path):
-    mount = tmp_path / "disk"
-    mount.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=2900k", "tmpfs", str(mount)],
-                      capture_output=True).returncode != 0:
-        pytest.skip("needs root to mount a small tmpfs")
-    yield mount
-    subprocess.run(["umount", "-l", str(mount)], capture_output=True)
+    with tmpfs(tmp_path / "disk", "2900k") as mount:
+        yield mount
 
 
 @pytest.mark.slow
