@@ -72,6 +72,12 @@ class Slip:
     views: tuple = ("bottom",)
 
 
+@dataclass(frozen=True)
+class Memory:
+    chunk_frames: int = spec(20000, ge=1000)
+    noise_sample_frames: int = spec(50000, ge=1000)
+
+
 REFERENCES = ("auto", "unloaded", "contact_onset", "time")
 
 
@@ -90,6 +96,7 @@ class AnalysisConfig:
     pour: Pour = field(default_factory=Pour)
     contact: Contact = field(default_factory=Contact)
     slip: Slip = field(default_factory=Slip)
+    memory: Memory = field(default_factory=Memory)
     reference: str = "auto"
     reference_time_s: float | None = None
     static_flow: str = "auto"                # flow.static: auto (where an estimate reads it) | all
@@ -170,7 +177,7 @@ def load_config(node=None) -> AnalysisConfig:
     raw = _plain(node)
     d = dict(raw)
     known = {"enabled", "tactile", "views", "flow", "baseline", "pressure", "segmentation", "estimates",
-             "pour", "contact", "slip", "save_fields", "figures", "max_segment_figures", "progress", "workers"}
+             "pour", "contact", "slip", "memory", "save_fields", "figures", "max_segment_figures", "progress", "workers"}
     _refuse_unknown("analysis", d, known)
     tac = dict(d.get("tactile") or {})
     # intensity_range: "contact" (each contact window spans 0..255 up to its own peak), or [low, high] kΩ
@@ -238,6 +245,7 @@ def load_config(node=None) -> AnalysisConfig:
                                       f"{views}, got {sl['views']!r}")
         sl["views"] = tuple(sl["views"])
     slip = _section(Slip, "slip", sl)
+    memory = _section(Memory, "memory", d.get("memory") or {})
     top = {k: _typed(k, d[k], t) for k, t in (("enabled", bool), ("save_fields", bool), ("figures", bool),
                                               ("max_segment_figures", int), ("progress", bool)) if k in d}
     if d.get("workers") is not None:
@@ -248,7 +256,7 @@ def load_config(node=None) -> AnalysisConfig:
     return AnalysisConfig(tactile=tactile, views=tuple(views), baseline_fallback_window_s=window,
                           baseline_fallback_contact_min=fb_min,
                           pressure_signal=signal, segmentation=seg, estimates=est, pour=pour, contact=con,
-                          slip=slip, reference=reference, reference_time_s=ref_time, static_flow=static_flow,
+                          slip=slip, memory=memory, reference=reference, reference_time_s=ref_time, static_flow=static_flow,
                           intensity=intensity,
                           raw=raw, **top)
 

@@ -15,6 +15,8 @@ import numpy as np
 
 from runstore.reader import open_run
 
+from .electrodes import StoredElectrodes, screen_counts
+
 
 class AnalysisInputError(ValueError):
     """The input cannot be analysed at all (not a run store, no tactile data)."""
@@ -39,12 +41,13 @@ class RunData:
         path: the store.
         time: (T,) BioTac frame times, s.
         fingers: finger names along axis 1 of ``electrodes``.
-        electrodes: (T, F, 24) raw counts (float64). Frames no finger can use and frames
-            with a bad time stamp are removed (``dropped``); a finger's own bad samples stay,
-            marked in ``valid``.
+        electrodes: (T, F, 24) raw counts (float64): an array, or for a long record a
+            :class:`.electrodes.StoredElectrodes` read a stretch at a time (``electrodes[a:b]``).
+            Frames no finger can use and frames with a bad time stamp are removed
+            (``dropped``); a finger's own bad samples stay, marked in ``valid``.
         valid: (T, F) bool, the finger's 24 electrodes all within 1..4094 counts (0 is a
             short or a deleted chunk read back as zeros, 4095 a saturated or shorted channel).
-        pdc: (T, F) PDC counts or ``None`` (records with electrodes only).
+        pdc: (T, F) PDC counts (float32) or ``None`` (records with electrodes only).
         baseline_counts: (F, 24) stored unloaded electrode counts (an imported recording's
             calibration or estimate, a recorded run's session calibration: ``biotac/baseline``)
             or ``None``; ``baseline_uncertainty`` (F, 24) counts, its stated uncertainty, if stored.
@@ -54,13 +57,13 @@ class RunData:
         attrs: root attributes; ``protocol``, ``labels``, ``status``.
         config: the run's resolved config (from provenance) or {}.
         missing: groups that were absent, with what that costs.
-        input_sha256: checksum of the arrays the analysis reads.
+        input_sha256: checksum of the stored arrays the analysis reads and of the frames kept.
     """
 
     path: Path
     time: np.ndarray
     fingers: list[str]
-    electrodes: np.ndarray
+    electrodes: np.ndarray | StoredElectrodes
     pdc: np.ndarray | None
     arm_time: np.ndarray | None
     tcp_pose: np.ndarray | None
@@ -119,19 +122,20 @@ def is_run_store(path: Path) -> bool:
     return path.is_dir() and (path / "zarr.json").is_file()
 
 
-COUNT_RANGE = (1.0, 4094.0)
-"""Electrode counts a working channel can report (0: shorted, or a chunk read back as zeros;
-4095: saturated, an impedance of 0 kΩ)."""
-
 MAX_BACKWARD_FRACTION = 0.01
 """A time axis that goes backwards at more than this fraction of its steps (shuffled) is not trusted."""
 
+IN_MEMORY_FRAMES = 20_000
+"""Records of at most this many frames are read whole (``analysis.memory.chunk_frames``)."""
 
-def screen_frames(path, time, electrodes, pdc, stored_valid):
-    """Check the time axis and each finger's samples; drop what no finger can use.
 
-    Returns ``(time, electrodes, pdc, valid, dropped)``: frames kept, the (T, F) validity of
-    each finger's samples, and the list of what was dropped and why. A time axis that goes
+def screen_frames(path, time, in_range, all_zero, pdc, stored_valid):
+    """Check the time axis and each finger's samples; choose the frames to keep.
+
+    ``in_range`` (T, F): the finger's 24 electrodes all within 1..4094 counts;
+    ``all_zero`` (T,): every electrode of every finger reads 0 (:func:`.electrodes.screen_counts`).
+    Returns ``(keep (T,) bool, valid (T, F) bool, dropped)``: the frames kept, the validity
+    of each finger's samples, and the list of what was dropped and why. A time axis that goes
     backwards at more than :data:`MAX_BACKWARD_FRACTION` of its steps (shuffled or
     overwritten) is an :class:`AnalysisInputError`: no part of such a record can be trusted
     to be in order. A few backward or repeated stamps drop those frames.
@@ -156,26 +160,27 @@ def screen_frames(path, time, electrodes, pdc, stored_valid):
         dropped.append({"what": "frames", "frames": int(late.sum()),
                         "reason": "time stamp not after the previous frame's (out of order or repeated)"})
         keep &= ~late
-    lo, hi = COUNT_RANGE
-    valid = np.all((electrodes >= lo) & (electrodes <= hi), axis=2) & stored_valid[:, None]
+    valid = in_range & stored_valid[:, None]
     if pdc is not None:
         valid &= np.isfinite(pdc)
     none = keep & ~valid.any(axis=1)
     if none.any():
-        zeros = none & np.all(electrodes == 0, axis=(1, 2))
+        zeros = none & all_zero
         why = ("every electrode of every finger reads 0 (a deleted or unreadable chunk read back as zeros)"
                if zeros.sum() == none.sum() else "no finger has all 24 electrodes within 1..4094 counts")
         dropped.append({"what": "frames", "frames": int(none.sum()), "reason": why})
         keep &= ~none
-    time, electrodes, valid = time[keep], electrodes[keep], valid[keep]
-    pdc = pdc[keep] if pdc is not None else None
-    if len(time) < 2:
-        raise AnalysisInputError(f"{path}: the run store holds {len(time)} valid tactile frame(s); nothing to analyse")
-    return time, electrodes, pdc, valid, dropped
+    if keep.sum() < 2:
+        raise AnalysisInputError(f"{path}: the run store holds {int(keep.sum())} valid tactile frame(s); "
+                                 f"nothing to analyse")
+    return keep, valid[keep], dropped
 
 
-def load_run(path) -> RunData:
+def load_run(path, in_memory_frames: int = IN_MEMORY_FRAMES) -> RunData:
     """Open ``path`` (a ``run.zarr``) and read what the analysis needs.
+
+    The electrodes of a record longer than ``in_memory_frames`` frames stay in the store
+    (:class:`.electrodes.StoredElectrodes`, read a stretch at a time); shorter ones are read whole.
 
     Raises :class:`AnalysisInputError` with one clear sentence when the path is not a run
     store or holds no usable tactile data. Missing optional groups (arm, events) are listed
@@ -199,13 +204,20 @@ def load_run(path) -> RunData:
     if "electrodes" not in b or "time" not in b.coords:
         raise AnalysisInputError(f"{path}: biotac group without electrodes/time; nothing to analyse")
     time = _values(b, "time", path)
-    electrodes = _values(b, "electrodes", path)
+    stored = StoredElectrodes(b["electrodes"].variable, None, lambda exc: _unreadable(path, "electrodes", exc))
     fingers = [str(f) for f in b["finger"].values]
-    pdc = _values(b, "pdc", path) if "pdc" in b else None
+    pdc = _values(b, "pdc", path, np.float32) if "pdc" in b else None     # counts: exact in float32
     baseline_counts = _values(b, "baseline", path) if "baseline" in b else None
     baseline_unc = _values(b, "baseline_uncertainty", path) if "baseline_uncertainty" in b else None
     stored_valid = _values(b, "valid", path, bool) if "valid" in b else np.ones(len(time), bool)
-    time, electrodes, pdc, valid, dropped = screen_frames(path, time, electrodes, pdc, stored_valid)
+    in_range, all_zero, electrodes_sha = screen_counts(stored)
+    keep, valid, dropped = screen_frames(path, time, in_range, all_zero, pdc, stored_valid)
+    del in_range, all_zero
+    time = time[keep]
+    pdc = pdc[keep] if pdc is not None else None
+    electrodes = stored.select(keep)
+    if len(electrodes) <= in_memory_frames:
+        electrodes = electrodes.materialise()
     missing = {}
     arm_time = tcp_pose = tcp_speed = None
     if "arm" in groups:
@@ -242,8 +254,8 @@ def load_run(path) -> RunData:
         except json.JSONDecodeError:
             prov = {}
     config = prov.get("config") or {} if isinstance(prov, dict) else {}
-    h = hashlib.sha256()
-    for arr in (time, electrodes, pdc, arm_time, tcp_pose, tcp_speed, events.time):
+    h = hashlib.sha256(electrodes_sha.encode())
+    for arr in (time, keep, pdc, arm_time, tcp_pose, tcp_speed, events.time):
         if arr is not None:
             h.update(np.ascontiguousarray(arr).tobytes())
     h.update(json.dumps([events.kind, events.name], sort_keys=True).encode())
@@ -259,9 +271,13 @@ def _values(ds, name: str, path: Path, dtype=float) -> np.ndarray:
     try:
         return np.asarray(ds[name].values, dtype)
     except Exception as exc:  # noqa: BLE001 - the codec's own error type varies
-        why = (str(exc).splitlines() or [""])[0][:120]
-        raise AnalysisInputError(f"{path}/biotac/{name}: a chunk cannot be read ({type(exc).__name__}: {why}); "
-                                 f"the store is damaged") from None
+        raise _unreadable(path, name, exc) from None
+
+
+def _unreadable(path: Path, name: str, exc: Exception) -> AnalysisInputError:
+    why = (str(exc).splitlines() or [""])[0][:120]
+    return AnalysisInputError(f"{path}/biotac/{name}: a chunk cannot be read ({type(exc).__name__}: {why}); "
+                              f"the store is damaged")
 
 
 def open_truth(path):

@@ -11,15 +11,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tactile import aggregate as tagg
 from tactile import contact as tcontact
-from tactile import signals
 
 from . import estimates as est
 from . import flows as fl
 from . import labels as labelling
 from . import segments as seg
 from . import slip as slp
+from .chunking import centre_of_pressure, finger_activation
 from .load import RunData
 from .preprocess import PreparedRun, prepare
 
@@ -94,7 +93,8 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
     s = cfg.segmentation
     rate = run.rate_hz
     T = len(run.time)
-    prepared = prepare(run, cfg, model)
+    scheme = labelling.scheme(run.labels)
+    prepared = prepare(run, cfg, model, causal_proxy=scheme == labelling.POUR)
     t_prep = _time.perf_counter()
     skipped: list[dict] = []
     for group, why in run.missing.items():
@@ -109,7 +109,6 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
                         "reason": "electrodes outside 1..4094 counts in these frames: bridged by interpolation"})
     for d in run.dropped:
         skipped.append({**d, "what": f"{d['frames']} {d['what']}"})
-    scheme = labelling.scheme(run.labels)
     method = contact_method(prepared, cfg)
     signal = np.zeros_like(prepared.pressure)
     contacts, thresholds, extrema, bumps = {}, {}, {}, {}
@@ -177,11 +176,12 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
     for i, sg in enumerate(kept):
         sg.id = i
 
-    aggregates = _segment_aggregates(run, prepared, kept, flows, model, rate, skipped)
+    aggregates = _segment_aggregates(run, prepared, kept, contacts, flows, model, rate, skipped)
     slips = {}
     for sg in kept:
         est_ = slp.estimate(fl.find(flows, sg.finger, sg.start, sg.stop),
-                            prepared.activation[:, run.fingers.index(sg.finger)], sg.start, sg.stop, model, cfg.slip)
+                            finger_activation(prepared.activation, run.fingers.index(sg.finger)), sg.start, sg.stop,
+                            model, cfg.slip)
         if est_ is not None:
             slips[sg.id] = est_
     crossings = _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) if scheme == labelling.SWEEP else []
@@ -207,12 +207,17 @@ def _row(w) -> dict:
             "divergence": w["divergence"], "rotation": w["rotation"], "confidence": w["confidence"]}
 
 
-def _segment_aggregates(run, prepared, segments, flows, model, rate, skipped) -> list[dict]:
+def _segment_aggregates(run, prepared, segments, contacts, flows, model, rate, skipped) -> list[dict]:
+    """Per segment: its centre of pressure (mean and displacement over its frames in contact:
+    none for a no_contact, approach or lift stretch) and its flow aggregates per view."""
     rows = []
     for sg in segments:
         cf = fl.find(flows, sg.finger, sg.start, sg.stop)
         k = run.fingers.index(sg.finger)
-        cop, _ = tagg.centre_of_pressure(prepared.activation[sg.start:sg.stop, k], model.taxels)
+        touching = [(max(a, sg.start), min(b, sg.stop)) for a, b in contacts.get(sg.finger, [])
+                    if a < sg.stop and b > sg.start]
+        cop = np.concatenate([centre_of_pressure(prepared.activation, k, a, b, model.taxels) for a, b in touching]
+                             or [np.zeros((0, 3))])
         good = np.all(np.isfinite(cop), axis=1)
         cop_mean = cop[good].mean(axis=0) if good.any() else np.full(3, np.nan)
         cop_disp = cop[good][-1] - cop[good][0] if good.sum() > 1 else np.full(3, np.nan)
@@ -352,8 +357,7 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
         else:
             # the grasp tightened right after the slip: a smoothed pressure would carry that rise
             # back over the slip's fall, so the slip is dated on the causal (filter-only) proxy
-            tc = cfg.tactile
-            fast = signals.kalman_filter(prepared.raw_activation[:, k], R=tc.kalman_r, Q=tc.kalman_q).sum(axis=-1)
+            fast = np.asarray(prepared.causal_proxy[:, k], float)
         ph = labelling.pour_phases(run.time, p, (a, b), ref, rot, pour_event, cfg.pour.rotation_rad,
                              cfg.pour.trough_prominence, int(round(cfg.segmentation.distance_s * rate)),
                              cfg.segmentation.plateau_level, fast=fast, reaction=reaction)

@@ -18,6 +18,13 @@ Each finger's samples outside 1..4094 counts (``RunData.valid``) are bridged by 
 interpolation in time; a finger with fewer than half its samples usable is not analysed
 (``unusable``, with the reason) and never holds the other fingers back.
 
+A record longer than ``memory.chunk_frames`` frames is prepared a stretch at a time
+(:mod:`analysis.chunking`: each stretch with the frames around it that the smoothers reach, so
+the values are those of the whole record); only the (T, F) signals below are kept whole, as
+float32, and the (T, F, 24) activations are computed again for the windows that ask for them.
+The record's noise level (below) is measured on at most ``memory.noise_sample_frames`` frames,
+evenly spread (every frame of a shorter record).
+
 Smoothing: a running median of ``contact.despike_frames`` frames (real BioTacs glitch on one
 electrode for a frame or two, by up to ~150 counts: see the resting recording in
 ``tests/data``), then Kalman + RTS (:meth:`tactile.pipeline.TactileModel.smooth`).
@@ -41,8 +48,10 @@ from scipy.ndimage import median_filter
 from tactile import contact as tcontact
 from tactile import signals
 
-from .load import COUNT_RANGE, RunData
-from .segments import smooth
+from .chunking import ImpedanceReader, LazyActivation, smoother_reach, stretches
+from .electrodes import COUNT_RANGE, READ_FRAMES
+from .load import RunData
+from .segments import savgol_frames, smooth
 
 MIN_USABLE_FRACTION = 0.5
 
@@ -68,14 +77,55 @@ class Baseline:
 
 
 @dataclass
+class Envelope:
+    """The activation of a record in ``bins`` stretches of time, for pictures of any length.
+
+    Attributes:
+        edges: (bins + 1,) frame indices of the stretches' boundaries.
+        raw_min, raw_max, act_min, act_max: (bins, F, 24) the lowest and highest raw and smoothed
+            activation (kΩ) within each stretch.
+        peak: (F, 24) the largest |smoothed activation| of each taxel over the record, kΩ.
+    """
+
+    edges: np.ndarray
+    raw_min: np.ndarray
+    raw_max: np.ndarray
+    act_min: np.ndarray
+    act_max: np.ndarray
+    peak: np.ndarray
+
+    @classmethod
+    def empty(cls, T: int, F: int, bins: int = 2000) -> Envelope:
+        edges = np.unique(np.linspace(0, T, min(bins, T) + 1).astype(np.int64))
+        n = len(edges) - 1
+        return cls(edges, *(np.full((n, F, 24), v) for v in (np.inf, -np.inf, np.inf, -np.inf)), np.zeros((F, 24)))
+
+    def add(self, a: int, raw: np.ndarray, act: np.ndarray) -> None:
+        """Fold in frames [a, a + len(raw)) (each (n, F, 24))."""
+        b = a + len(raw)
+        first = int(np.searchsorted(self.edges, a, "right")) - 1
+        last = int(np.searchsorted(self.edges, b - 1, "right")) - 1
+        starts = np.maximum(self.edges[first:last + 1], a) - a
+        for lo, hi, x in ((self.raw_min, self.raw_max, raw), (self.act_min, self.act_max, act)):
+            lo[first:last + 1] = np.minimum(lo[first:last + 1], np.minimum.reduceat(x, starts, axis=0))
+            hi[first:last + 1] = np.maximum(hi[first:last + 1], np.maximum.reduceat(x, starts, axis=0))
+        np.maximum(self.peak, np.abs(act).max(axis=0), out=self.peak)
+
+
+@dataclass
 class PreparedRun:
     """Smoothed activation, pressure and contact score of every finger.
 
     Attributes:
         raw_activation: (T, F, 24) unsmoothed activation, kΩ.
-        activation: (T, F, 24) despiked, Kalman+RTS smoothed activation, kΩ.
+        activation: (T, F, 24) despiked, Kalman+RTS smoothed activation, kΩ. Both are arrays,
+            or for a record of more than ``memory.chunk_frames`` frames
+            :class:`analysis.chunking.LazyActivation`: index them by windows (``[a:b, k]``).
         pressure: (T, F) pressure above rest (``pressure_units``).
         proxy: (T, F) sum of smoothed activations, kΩ (always computed).
+        causal_proxy: (T, F) sum of the forward-only Kalman-filtered raw activation, kΩ: what
+            an online estimate knows at each frame (dates a slip the smoother would blur), or
+            ``None`` when not asked for.
         pressure_units: "count" (PDC) or "kohm" (proxy).
         pressure_name: "pdc" or "proxy".
         baseline: the :class:`Baseline`.
@@ -84,14 +134,20 @@ class PreparedRun:
         score: (T, F) contact score (noise units) of the smoothed activation.
         fine_score: (T, F) the same of the despiked activation lightly smoothed
             (Savitzky–Golay over ``segmentation.smooth_s``), for the contacts' edges.
+        envelope: the :class:`Envelope` of the activations, for figures.
+        preparation: how the record was prepared (for provenance): ``stretches``,
+            ``chunk_frames``, ``noise_sample_every`` (frames).
         usable: finger → True if analysed; ``unusable``: finger → reason it is not.
         repaired: finger → samples bridged by interpolation.
+
+    The (T, F) signals are float64, or float32 for a record prepared in stretches.
     """
 
-    raw_activation: np.ndarray
-    activation: np.ndarray
+    raw_activation: np.ndarray | LazyActivation
+    activation: np.ndarray | LazyActivation
     pressure: np.ndarray
     proxy: np.ndarray
+    causal_proxy: np.ndarray | None
     pressure_units: str
     pressure_name: str
     baseline: Baseline
@@ -99,6 +155,8 @@ class PreparedRun:
     noise: np.ndarray
     score: np.ndarray
     fine_score: np.ndarray
+    envelope: Envelope
+    preparation: dict = field(default_factory=dict)
     unusable: dict = field(default_factory=dict)
     repaired: dict = field(default_factory=dict)
 
@@ -133,52 +191,57 @@ def quietest_window(level, n: int) -> tuple[int, int]:
     return start, start + n
 
 
-def repair(counts: np.ndarray, valid: np.ndarray, fingers) -> tuple[np.ndarray, dict, dict]:
-    """Impedance (T, F, 24) kΩ with each finger's invalid samples bridged linearly in time.
+def unusable_fingers(electrodes, valid: np.ndarray, fingers) -> tuple[dict, dict]:
+    """``(unusable, repaired)``: the fingers with fewer than :data:`MIN_USABLE_FRACTION` usable
+    samples (finger → why), and the others' count of samples to bridge (finger → frames).
 
-    Returns ``(impedance, unusable, repaired)``: fingers with fewer than
-    :data:`MIN_USABLE_FRACTION` usable samples are left as they are (counts clipped into
-    :data:`.load.COUNT_RANGE`, so every impedance is finite) and named in ``unusable`` with
-    the reason."""
-    T = counts.shape[0]
-    safe = np.clip(counts, *COUNT_RANGE)
-    imp = signals.counts_to_impedance(safe)
+    ``electrodes``: (T, F, 24) counts (array or stored); ``valid``: (T, F) bool."""
+    T = len(valid)
     unusable, repaired = {}, {}
-    idx = np.arange(T)
     for k, f in enumerate(fingers):
-        ok = valid[:, k]
-        if ok.all():
+        ok = int(valid[:, k].sum())
+        if ok == T:
             continue
-        if ok.sum() < max(2, MIN_USABLE_FRACTION * T):
-            c = counts[:, k]
-            if np.all(c <= 0):
-                why = "every electrode reads 0 in every frame (disconnected, or a channel shorted)"
-            elif np.all(c >= 4095):
-                why = "every electrode reads 4095 (saturated: an impedance of 0 kΩ) in every frame"
-            else:
-                stuck = np.flatnonzero(np.all((c < 1) | (c > 4094), axis=0))
-                why = (f"taxel(s) {', '.join(str(i + 1) for i in stuck)} outside 1..4094 counts throughout"
-                       if stuck.size else f"only {int(ok.sum())} of {T} frames have all 24 electrodes within "
-                                          f"1..4094 counts")
-            unusable[f] = why
-            continue
-        for j in range(imp.shape[2]):
-            imp[~ok, k, j] = np.interp(idx[~ok], idx[ok], imp[ok, k, j])
-        repaired[f] = int((~ok).sum())
-    return imp, unusable, repaired
+        if ok < max(2, MIN_USABLE_FRACTION * T):
+            unusable[f] = _why_unusable(electrodes, k, ok, T)
+        else:
+            repaired[f] = T - ok
+    return unusable, repaired
 
 
-def choose_baseline(run: RunData, imp: np.ndarray, cfg) -> Baseline:
-    """The rest impedance, its uncertainty and where it comes from (module doc)."""
+def _why_unusable(electrodes, k: int, ok: int, T: int) -> str:
+    zero, saturated, stuck = True, True, np.ones(24, bool)
+    for a in range(0, T, READ_FRAMES):
+        c = electrodes[a:a + READ_FRAMES, k]
+        zero &= bool(np.all(c <= 0))
+        saturated &= bool(np.all(c >= 4095))
+        stuck &= np.all((c < 1) | (c > 4094), axis=0)
+    if zero:
+        return "every electrode reads 0 in every frame (disconnected, or a channel shorted)"
+    if saturated:
+        return "every electrode reads 4095 (saturated: an impedance of 0 kΩ) in every frame"
+    if stuck.any():
+        return f"taxel(s) {', '.join(str(i + 1) for i in np.flatnonzero(stuck))} outside 1..4094 counts throughout"
+    return f"only {ok} of {T} frames have all 24 electrodes within 1..4094 counts"
+
+
+def choose_baseline(run: RunData, read: ImpedanceReader, cfg) -> Baseline:
+    """The rest impedance, its uncertainty and where it comes from (module doc); ``read(a, b)``
+    gives the (repaired) impedance of frames [a, b)."""
     F = len(run.fingers)
     n_fb = int(round(cfg.baseline_fallback_window_s * run.rate_hz))
     window = tare_window(run)
     if window is not None:
-        base = imp[window[0]:window[1]].mean(axis=0)
+        base = read(*window).mean(axis=0)
         return Baseline("tare", base, np.zeros((F, 24)), "tare: the protocol's rest stretch before the contact",
                         [window] * F)
-    level = run.pdc if run.pdc is not None else imp.sum(axis=2)
+    if run.pdc is not None:
+        level = run.pdc
+    else:
+        level = np.concatenate([read(a, min(a + READ_FRAMES, read.T)).sum(axis=2)
+                                for a in range(0, read.T, READ_FRAMES)])
     rest = [quietest_window(level[:, k], n_fb) for k in range(F)]
+    del level
     if run.baseline_counts is not None:
         counts = np.clip(run.baseline_counts, *COUNT_RANGE)
         method = (run.attrs.get("baseline") or {}).get("method", "stored")
@@ -190,7 +253,7 @@ def choose_baseline(run: RunData, imp: np.ndarray, cfg) -> Baseline:
         unc = tcontact.counts_uncertainty_to_log(counts, sigma)
         return Baseline("stored", signals.counts_to_impedance(counts), np.broadcast_to(unc, (F, 24)).copy(),
                         f"no tare event: the stored baseline biotac/baseline ({method}), uncertain by {how}", rest)
-    base = np.stack([imp[a:b, k].mean(axis=0) for k, (a, b) in enumerate(rest)])
+    base = np.stack([read(a, b, k).mean(axis=0) for k, (a, b) in enumerate(rest)])
     what = "PDC" if run.pdc is not None else "summed electrode impedance"
     return Baseline("record", base, np.zeros((F, 24)),
                     f"no tare event and no stored baseline: the {cfg.baseline_fallback_window_s:g} s stretch of "
@@ -205,36 +268,96 @@ def despike(impedance: np.ndarray, frames: int) -> np.ndarray:
     return median_filter(impedance, size=(frames | 1,) + (1,) * (impedance.ndim - 1), mode="nearest")
 
 
-def prepare(run: RunData, cfg, model) -> PreparedRun:
-    """Baseline → activation → despike + Kalman/RTS → pressure and contact score, all fingers."""
-    valid = run.valid if run.valid is not None else np.ones(run.electrodes.shape[:2], bool)
-    imp, unusable, repaired = repair(run.electrodes, valid, run.fingers)
-    baseline = choose_baseline(run, imp, cfg)
-    raw = signals.activation(imp, baseline.impedance)
+def smoothed(imp: np.ndarray, rest: np.ndarray, cfg, model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(raw, despiked, smoothed)`` activation (kΩ) of impedance ``imp`` (T, ..., 24) above ``rest``."""
+    raw = signals.activation(imp, rest)
     clean = despike(raw, cfg.contact.despike_frames)
-    act = model.smooth(clean)
-    proxy = signals.pdc_proxy(act)                                   # (T, F)
-    use_pdc = run.pdc is not None and cfg.pressure_signal in ("auto", "pdc")
-    description = baseline.description
+    return raw, clean, model.smooth(clean)
+
+
+def prepare(run: RunData, cfg, model, causal_proxy: bool = True) -> PreparedRun:
+    """Baseline → activation → despike + Kalman/RTS → pressure and contact score, all fingers,
+    in one piece or a stretch at a time (module doc); ``causal_proxy=False`` leaves out the
+    causal proxy (only a pour's slip dating reads it)."""
+    T, F = len(run.time), len(run.fingers)
+    rate = run.rate_hz
+    valid = run.valid if run.valid is not None else np.ones((T, F), bool)
+    unusable, repaired = unusable_fingers(run.electrodes, valid, run.fingers)
+    read = ImpedanceReader(run.electrodes, valid, [k for k, f in enumerate(run.fingers) if f not in unusable])
+    baseline = choose_baseline(run, read, cfg)
     if cfg.pressure_signal == "pdc" and run.pdc is None:
-        description += "; pressure.signal=pdc but the record has no PDC: proxy used"
-    baseline.description = description
-    if use_pdc:
-        p0 = np.array([run.pdc[a:b, k].mean() for k, (a, b) in enumerate(baseline.rest)])
-        pressure = run.pdc - p0
-        units, name = "count", "pdc"
+        baseline.description += "; pressure.signal=pdc but the record has no PDC: proxy used"
+    tc = model.config
+    reach = smoother_reach(tc.kalman_r, tc.kalman_q, cfg.contact.despike_frames,
+                           savgol_frames(rate, cfg.segmentation.smooth_s))
+    parts = stretches(T, cfg.memory.chunk_frames, reach)
+    whole = len(parts) == 1
+    dtype = np.float64 if whole else np.float32
+    base, unc = baseline.impedance, baseline.uncertainty
+    progress = _progress(cfg, T, len(parts))
+
+    # pass 1: the proxies, the residuals the noise is measured on, the envelope
+    proxy = np.empty((T, F), dtype)
+    causal = np.empty((T, F), dtype) if causal_proxy else None
+    stride = -(-T // cfg.memory.noise_sample_frames)
+    residual = np.empty((len(range(0, T, stride)), F, 24))         # ln Z − ln Z_smoothed, sampled frames
+    envelope, kept = Envelope.empty(T, F), None
+    for (a, b), (a0, b0) in parts:
+        imp = read(a0, b0)
+        raw, clean, act = smoothed(imp, base, cfg, model)
+        core = slice(a - a0, b - a0)
+        proxy[a:b] = signals.pdc_proxy(act[core])
+        if causal is not None:
+            causal[a:b] = signals.kalman_filter(raw, R=tc.kalman_r, Q=tc.kalman_q)[core].sum(axis=-1)
+        rows = np.arange(a + (-a) % stride, b, stride)
+        residual[rows // stride] = np.log(imp[rows - a0]) - np.log(np.maximum(base + act[rows - a0], 1e-6))
+        envelope.add(a, raw[core], act[core])
+        kept = (raw, clean, act) if whole else None
+        progress.update(b - a)
+    noise = tcontact.noise_from_residuals(residual, floor=1e-6, overwrite=True)          # (F, 24)
+    del residual
+
+    # pass 2: the contact scores, which need the noise
+    score, fine = np.empty((T, F), dtype), np.empty((T, F), dtype)
+    for (a, b), (a0, b0) in parts:
+        raw, clean, act = kept if whole else smoothed(read(a0, b0), base, cfg, model)
+        core = slice(a - a0, b - a0)
+        change = tcontact.relative_change(np.maximum(base + act[core], 1e-6), base)
+        score[a:b] = tcontact.contact_score(change, noise, unc)
+        light = np.maximum(base + smooth(clean, rate, cfg.segmentation.smooth_s)[core], 1e-6)
+        fine[a:b] = tcontact.contact_score(tcontact.relative_change(light, base), noise, unc)
+        progress.update(b - a)
+    progress.close()
+    for f in unusable:
+        score[:, run.fingers.index(f)] = fine[:, run.fingers.index(f)] = 0.0
+
+    if run.pdc is not None and cfg.pressure_signal in ("auto", "pdc"):
+        p0 = np.array([run.pdc[a:b, k].mean(dtype=np.float64) for k, (a, b) in enumerate(baseline.rest)])
+        pressure, units, name = np.empty((T, F), dtype), "count", "pdc"
+        for k in range(F):
+            pressure[:, k] = run.pdc[:, k] - p0[k]
     else:
         pressure, units, name = proxy.copy(), "kohm", "proxy"
     rest_noise = np.array([max(float(np.std(pressure[a:b, k])), 1e-6) for k, (a, b) in enumerate(baseline.rest)])
-    smooth_imp = np.maximum(baseline.impedance + act, 1e-6)
-    noise = tcontact.residual_noise(np.log(imp), np.log(smooth_imp), floor=1e-6)             # (F, 24)
-    change = tcontact.relative_change(smooth_imp, baseline.impedance)
-    score = tcontact.contact_score(change, noise, baseline.uncertainty)
-    light = np.maximum(baseline.impedance + smooth(clean, run.rate_hz, cfg.segmentation.smooth_s), 1e-6)
-    fine = tcontact.contact_score(tcontact.relative_change(light, baseline.impedance), noise, baseline.uncertainty)
-    for f in unusable:
-        score[:, run.fingers.index(f)] = fine[:, run.fingers.index(f)] = 0.0
-    return PreparedRun(raw_activation=raw, activation=act, pressure=pressure, proxy=proxy, pressure_units=units,
-                    pressure_name=name, baseline=baseline, rest_noise=rest_noise, noise=noise, score=score,
-                    fine_score=fine,
-                    unusable=unusable, repaired=repaired)
+    if whole:
+        raw_activation, activation = kept[0], kept[2]
+    else:
+        def rest_of(k):
+            return base if k is None else base[k]
+        raw_activation = LazyActivation(lambda a0, b0, k: signals.activation(read(a0, b0, k), rest_of(k)),
+                                        (T, F, 24), 0, cfg.memory.chunk_frames)
+        activation = LazyActivation(lambda a0, b0, k: smoothed(read(a0, b0, k), rest_of(k), cfg, model)[2],
+                                    (T, F, 24), reach, cfg.memory.chunk_frames)
+    return PreparedRun(raw_activation=raw_activation, activation=activation, pressure=pressure, proxy=proxy,
+                       causal_proxy=causal, pressure_units=units, pressure_name=name, baseline=baseline,
+                       rest_noise=rest_noise, noise=noise, score=score, fine_score=fine, envelope=envelope,
+                       preparation={"stretches": len(parts), "chunk_frames": cfg.memory.chunk_frames,
+                                    "noise_sample_every": stride},
+                       unusable=unusable, repaired=repaired)
+
+
+def _progress(cfg, T: int, stretches_: int):
+    """A progress bar over both passes of a record prepared in stretches (none for one piece)."""
+    from tqdm import tqdm
+    return tqdm(total=2 * T, unit="frame", desc="preprocessing", leave=False, dynamic_ncols=True,
+                disable=not cfg.progress or stretches_ == 1)

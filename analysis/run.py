@@ -126,7 +126,7 @@ def analyze_run(store_path, analysis_cfg=None, *, console=print) -> dict:
 
 
 def _analyse_and_write(store_path: Path, cfg, console) -> dict:
-    run = load_run(store_path)
+    run = load_run(store_path, in_memory_frames=cfg.memory.chunk_frames)
     model = get_model(cfg.tactile)
     a = analyse(run, cfg, model)
     run_dir = store_path.parent
@@ -139,7 +139,8 @@ def _analyse_and_write(store_path: Path, cfg, console) -> dict:
                             "sha256": run.input_sha256, "frames": len(run.time),
                             "dropped_invalid_frames": run.dropped_invalid},
                   "baseline": a.prepared.baseline_source, "baseline_kind": a.prepared.baseline.kind,
-                  "contact_method": a.contact_method, "pressure_signal": a.prepared.pressure_name}
+                  "contact_method": a.contact_method, "pressure_signal": a.prepared.pressure_name,
+                  "preparation": a.prepared.preparation}
     score = None
     truth = open_truth(store_path)
     if truth is not None:

@@ -13,12 +13,16 @@ import numpy as np
 from scipy.signal import find_peaks, savgol_filter
 
 
+def savgol_frames(rate_hz: float, window_s: float) -> int:
+    """Frames in the Savitzky–Golay window of :func:`smooth` (``window_s`` s, odd, ≥ 5)."""
+    return max(int(round(window_s * rate_hz)) | 1, 5)
+
+
 def smooth(signal, rate_hz: float, window_s: float) -> np.ndarray:
     """Savitzky–Golay (quadratic) smoothing along the first axis (time) over ``window_s``
-    seconds (odd ≥ 5 samples)."""
+    seconds (:func:`savgol_frames` samples)."""
     x = np.asarray(signal, float)
-    n = int(round(window_s * rate_hz)) | 1
-    n = max(n, 5)
+    n = savgol_frames(rate_hz, window_s)
     if len(x) < n:
         return x.copy()
     return savgol_filter(x, n, 2, axis=0)
@@ -55,7 +59,6 @@ class Extrema:
     peaks: np.ndarray
     troughs: np.ndarray
     prominence: float
-    shifted: np.ndarray
 
 
 def extrema(signal, rate_hz: float, prominence: float, distance_s: float) -> Extrema:
@@ -69,7 +72,7 @@ def extrema(signal, rate_hz: float, prominence: float, distance_s: float) -> Ext
     dist = max(1, int(round(distance_s * rate_hz)))
     peaks, _ = find_peaks(shifted, prominence=prominence, distance=dist)
     troughs, _ = find_peaks(-shifted, prominence=prominence, distance=dist)
-    return Extrema(peaks.astype(int), troughs.astype(int), float(prominence), shifted)
+    return Extrema(peaks.astype(int), troughs.astype(int), float(prominence))
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ import numpy as np
 
 from ._checks import finite_array
 
-__all__ = ["P90_TO_STD", "residual_noise", "relative_change", "contact_score", "refine_edges",
+__all__ = ["P90_TO_STD", "residual_noise", "noise_from_residuals", "relative_change", "contact_score", "refine_edges",
            "counts_uncertainty_to_log"]
 
 P90_TO_STD = 1.645
@@ -59,7 +59,17 @@ def residual_noise(signal, smoothed, *, axis: int = 0, floor: float = 1e-9) -> n
     if x.shape != y.shape or x.ndim == 0 or x.shape[axis] < 1:
         raise ValueError(f"signal, smoothed: expected two arrays of the same shape with samples along axis "
                          f"{axis}, got {x.shape} and {y.shape}")
-    return np.maximum(np.percentile(np.abs(x - y), 90, axis=axis) / P90_TO_STD, floor)
+    return noise_from_residuals(x - y, axis=axis, floor=floor, overwrite=True)
+
+
+def noise_from_residuals(residuals: np.ndarray, *, axis: int = 0, floor: float = 1e-9,
+                         overwrite: bool = False) -> np.ndarray:
+    """:func:`residual_noise` of residuals already computed (``signal − smoothed``): the 90th
+    percentile of their absolute value over 1.645, at least ``floor``. ``overwrite=True`` lets
+    it work in ``residuals`` itself (no copy: for a long record's large sample)."""
+    r = residuals if overwrite else np.array(residuals, float)
+    np.abs(r, out=r)
+    return np.maximum(np.percentile(r, 90, axis=axis, overwrite_input=True) / P90_TO_STD, floor)
 
 
 def relative_change(impedance, rest_impedance) -> np.ndarray:

@@ -20,6 +20,8 @@ SLOW_MODULES = {"test_reactive.py", "test_slip_in_place.py", "test_analysis_runs
                 "test_cli.py", "test_faults.py", "test_hostile_input.py", "test_real_contact.py"}
 #: single slow tests of otherwise fast modules (node id prefixes)
 SLOW_TESTS = ("tests/test_geometry.py::test_accurate_geodesic_matches_principal_section_arc",
+              "tests/test_long_records.py::test_a_record_analysed_in_pieces",
+              "tests/test_long_records.py::test_tactile_analyze_streams_a_long_record",
               "tests/test_recorder.py::test_clock_model_matches_the_simulators_sample_times",
               "tests/test_recorder.py::test_sigkill_leaves_a_consistent_store_missing_at_most_one_second",
               "tests/test_guides.py::test_first_session_runs_plan_without_hardware",
