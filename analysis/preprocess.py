@@ -43,7 +43,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import median_filter
 
 from tactile import contact as tcontact
 from tactile import signals
@@ -265,7 +264,7 @@ def despike(impedance: np.ndarray, frames: int) -> np.ndarray:
     """Running median of ``frames`` (odd) frames along time; ``frames`` ≤ 1 returns the input."""
     if frames <= 1 or len(impedance) < frames:
         return impedance
-    return median_filter(impedance, size=(frames | 1,) + (1,) * (impedance.ndim - 1), mode="nearest")
+    return signals.running_median(impedance, frames)
 
 
 def smoothed(imp: np.ndarray, rest: np.ndarray, cfg, model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

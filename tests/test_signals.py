@@ -6,6 +6,8 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tactile.signals import (
     SensorCalibration,
@@ -252,3 +254,15 @@ def test_kalman_rejects_bad_input(fn):
         fn(z, R=np.full(5, 0.01))                        # does not fit 24 channels
     with pytest.raises(ValueError, match="^x0:"):
         fn(z, x0=np.zeros(3))
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 100_000), T=st.integers(1, 80), frames=st.sampled_from([1, 3, 5, 7, 9]))
+def test_running_median_is_scipys_median_filter_with_the_edges_repeated(seed, T, frames):
+    """The despiking median (numba) gives scipy's values exactly, ties and short records included."""
+    from scipy.ndimage import median_filter
+
+    from tactile.signals import running_median
+    x = np.random.default_rng(seed).integers(0, 5, (T, 2, 3)).astype(float)     # many ties
+    np.testing.assert_array_equal(running_median(x, frames),
+                                  median_filter(x, size=(frames, 1, 1), mode="nearest"))
