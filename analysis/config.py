@@ -74,7 +74,7 @@ class Slip:
 
 @dataclass(frozen=True)
 class Memory:
-    chunk_frames: int = spec(20000, ge=1000)
+    chunk_frames: int = spec(10000, ge=1000)
     noise_sample_frames: int = spec(50000, ge=1000)
 
 

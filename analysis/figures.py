@@ -86,18 +86,39 @@ def _rows(n: int, height: float, top_in: float = 0.45, bottom_in: float = 0.55):
     return fig
 
 
+def _decimated(t: np.ndarray, y: np.ndarray, bins: int = 2000) -> tuple[np.ndarray, np.ndarray]:
+    """``(t, y)`` with at most ``2·bins`` points: each stretch of frames by its lowest and highest
+    value, in time order (a line drawn through them looks, at a figure's resolution, as the
+    whole record would); a record of at most ``2·bins`` frames as it is."""
+    if len(t) <= 2 * bins:
+        return t, y
+    edges = np.unique(np.linspace(0, len(t), bins + 1).astype(np.int64))
+    return _interleave(t, edges, np.minimum.reduceat(y, edges[:-1]), np.maximum.reduceat(y, edges[:-1]))
+
+
+def _interleave(t: np.ndarray, edges: np.ndarray, low: np.ndarray, high: np.ndarray):
+    """The (2·bins,) times and values of stretches ``edges`` drawn by their lowest then highest value."""
+    tt = np.repeat(t[edges[:-1]], 2)
+    tt[1::2] = t[edges[1:] - 1]
+    yy = np.empty((2 * len(low),) + low.shape[1:])
+    yy[0::2], yy[1::2] = low, high
+    return tt, yy
+
+
 def electrodes(a):
     fingers = list(a.contacts) or [a.run.fingers[0]]
     fig = _rows(len(fingers), 2.8)
     axes = fig.subplots(len(fingers), 1, squeeze=False, sharex=True)[:, 0]
-    t = a.run.time
+    t, env = a.run.time, a.prepared.envelope
     for ax, f in zip(axes, fingers):
         k = a.run.fingers.index(f)
-        top = np.argsort(-np.abs(a.prepared.activation[:, k]).max(axis=0))[:5]
+        top = np.argsort(-env.peak[k])[:5]
+        tr, raw = _interleave(t, env.edges, env.raw_min[:, k][:, top], env.raw_max[:, k][:, top])
+        ts, act = _interleave(t, env.edges, env.act_min[:, k][:, top], env.act_max[:, k][:, top])
         for j, tx in enumerate(top):
             c, ls = TAXEL_COLOURS[j], TAXEL_STYLES[j]
-            ax.plot(t, a.prepared.raw_activation[:, k, tx], color=c, lw=0.5, alpha=0.35)
-            ax.plot(t, a.prepared.activation[:, k, tx], color=c, ls=ls, lw=1.5, label=f"taxel {tx + 1}")
+            ax.plot(tr, raw[:, j], color=c, lw=0.5, alpha=0.35)
+            ax.plot(ts, act[:, j], color=c, ls=ls, lw=1.5, label=f"taxel {tx + 1}")
         ax.set_ylabel("activation (kΩ)")
         ax.set_title(f"{f}: raw (thin) vs Kalman+RTS smoothed (thick), the 5 most active taxels", fontsize=10)
         ax.legend(**LEGEND)
@@ -115,7 +136,7 @@ def pressure(a):
         k = a.run.fingers.index(f)
         p = a.prepared.pressure[:, k]
         _bands(ax, a, f)
-        ax.plot(t, p, color="k", lw=1, label="pressure")
+        ax.plot(*_decimated(t, p), color="k", lw=1, label="pressure")
         ex = a.extrema.get(f)
         if ex is not None and a.scheme == "sweep":      # the features crossed; a pour's are its phase bands
             ax.plot(t[ex.peaks], p[ex.peaks], "v", color="C3", label="peaks")
@@ -135,9 +156,9 @@ def taxels(a):
     fig = _figure(11, 6.2)
     fig.subplots_adjust(top=0.93, bottom=0.09, hspace=0.12, **WIDE)
     ax, ax2 = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [2, 1]})
-    act = a.prepared.activation[:, k]
-    im = ax.imshow(act.T, aspect="auto", origin="lower", extent=(t[0], t[-1], 0.5, 24.5), cmap="magma",
-                   interpolation="nearest")
+    env = a.prepared.envelope                    # a long record: each stretch of frames by its highest value
+    im = ax.imshow(env.act_max[:, k].T, aspect="auto", origin="lower", extent=(t[0], t[-1], 0.5, 24.5),
+                   cmap="magma", interpolation="nearest")
     for sg in a.segments:                       # the bands as a strip along the heatmap's top
         if sg.finger == f and sg.label != "all":
             t1 = t[min(sg.stop, len(t) - 1)]
@@ -148,7 +169,7 @@ def taxels(a):
     ax.set_ylabel("taxel (1..24)")
     ax.set_title(f"{f}: smoothed taxel activations (impedance above rest); segments along the top", fontsize=10)
     _bands(ax2, a, f)
-    ax2.plot(t, act, lw=0.6)
+    ax2.plot(*_interleave(t, env.edges, env.act_min[:, k], env.act_max[:, k]), lw=0.6)
     ax2.set_xlim(t[0], t[-1])
     ax2.set_ylabel("activation (kΩ)")
     ax2.set_xlabel("time since run start (s)")

@@ -111,13 +111,13 @@ def available_workers() -> int:
 
 
 def compute(prepared, contacts: dict[str, list[tuple[int, int]]], fingers: list[str], model, margin: int,
-            signal: np.ndarray, threshold: dict[str, float], settle: int, plan: FlowPlan,
+            signal: dict[str, np.ndarray], threshold: dict[str, float], settle: int, plan: FlowPlan,
             keep_fields: bool = False, progress: bool = True, workers: int = 1):
     """Flow for every (finger, contact). Returns (list of ContactFlow, CPU seconds of the
     rendering and flow jobs: their wall time summed, so the same with any ``workers``).
 
-    ``contacts``: finger → contact intervals; ``signal`` (T, F) and ``threshold``: finger →
-    level: the contact signal and its threshold, for the contact onset; ``workers``: threads
+    ``contacts``: finger → contact intervals; ``signal``: finger → (T,) contact signal and
+    ``threshold``: finger → its level, for the contact onset; ``workers``: threads
     running the (window, view) jobs.
     """
     from tqdm import tqdm
@@ -135,7 +135,7 @@ def compute(prepared, contacts: dict[str, list[tuple[int, int]]], fingers: list[
     for f, k, (a, b), (w0, w1) in jobs:
         act = prepared.activation[w0:w1, k]
         try:
-            settled = onset = w0 + tflow.contact_reference(signal[w0:w1, k], threshold[f],
+            settled = onset = w0 + tflow.contact_reference(signal[f][w0:w1], threshold[f],
                                                            settle=min(settle, max(1, b - a)))
             if a > 0:           # a record that begins in contact begins loaded: its first settled frame
                 onset = tflow.loaded_reference(prepared.score[:b, k], onset, plan.load_fraction)

@@ -125,7 +125,7 @@ def is_run_store(path: Path) -> bool:
 MAX_BACKWARD_FRACTION = 0.01
 """A time axis that goes backwards at more than this fraction of its steps (shuffled) is not trusted."""
 
-IN_MEMORY_FRAMES = 20_000
+IN_MEMORY_FRAMES = 10_000
 """Records of at most this many frames are read whole (``analysis.memory.chunk_frames``)."""
 
 

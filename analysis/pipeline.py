@@ -110,17 +110,17 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
     for d in run.dropped:
         skipped.append({**d, "what": f"{d['frames']} {d['what']}"})
     method = contact_method(prepared, cfg)
-    signal = np.zeros_like(prepared.pressure)
+    signal = {}                          # finger → (T,) the signal its contacts are found on
     contacts, thresholds, extrema, bumps = {}, {}, {}, {}
     for k, f in enumerate(run.fingers):
         if f in prepared.unusable:
             continue
         p = seg.smooth(prepared.pressure[:, k], rate, s.smooth_s)
         if method == "pattern":
-            signal[:, k], thr = prepared.score[:, k], cfg.contact.threshold_sigma
+            signal[f], thr = prepared.score[:, k], cfg.contact.threshold_sigma
         else:
-            signal[:, k], thr = p, _threshold(prepared, k, cfg)
-        ivs = seg.contact_intervals(signal[:, k], thr, rate, s.min_contact_s, s.merge_gap_s)
+            signal[f], thr = p.astype(prepared.pressure.dtype, copy=False), _threshold(prepared, k, cfg)
+        ivs = seg.contact_intervals(signal[f], thr, rate, s.min_contact_s, s.merge_gap_s)
         if method == "pattern":
             reach = int(round(EDGE_REACH_S * rate))
             ivs = tcontact.refine_edges(ivs, prepared.fine_score[:, k], thr, reach)
