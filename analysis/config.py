@@ -100,6 +100,7 @@ class AnalysisConfig:
     reference: str = "auto"
     reference_time_s: float | None = None
     static_flow: str = "auto"                # flow.static: auto (where an estimate reads it) | all
+    static_every: int = 4                    # flow.static_every: frames between static-flow computations
     workers: int | None = None               # threads of the flow jobs; None: the cores available
     intensity: str = "contact"
     save_fields: bool = False
@@ -112,7 +113,7 @@ class AnalysisConfig:
 _TACTILE_KEYS = {"kalman_r": float, "kalman_q": float, "smooth": bool, "sigma": float, "kernel": str,
                  "geodesic": str, "mesh_spacing": float, "scale": float, "render": str, "size": list,
                  "intensity_range": list, "noise": float, "chunk": int}
-_FLOW_ANALYSIS_KEYS = {"reference", "reference_time_s", "static"}
+_FLOW_ANALYSIS_KEYS = {"reference", "reference_time_s", "static", "static_every"}
 _FLOW_KEYS = {"method": str, "pyr_scale": float, "levels": int, "winsize": int, "iterations": int,
               "poly_n": int, "poly_sigma": float, "flags": int, "dis_preset": str, "dis": dict, "tvl1": dict}
 
@@ -192,6 +193,9 @@ def load_config(node=None) -> AnalysisConfig:
     static_flow = _typed("flow.static", fl.pop("static", "auto"), str)
     if static_flow not in ("auto", "all"):
         raise AnalysisConfigError(f"analysis.flow.static: expected auto or all, got {static_flow!r}")
+    static_every = _typed("flow.static_every", fl.pop("static_every", 4), int)
+    if static_every < 1:
+        raise AnalysisConfigError(f"analysis.flow.static_every: expected an integer ≥ 1 (frames), got {static_every}")
     ref_time = fl.pop("reference_time_s", None)
     if ref_time is not None:
         ref_time = _typed("flow.reference_time_s", ref_time, float)
@@ -257,6 +261,7 @@ def load_config(node=None) -> AnalysisConfig:
                           baseline_fallback_contact_min=fb_min,
                           pressure_signal=signal, segmentation=seg, estimates=est, pour=pour, contact=con,
                           slip=slip, memory=memory, reference=reference, reference_time_s=ref_time, static_flow=static_flow,
+                          static_every=static_every,
                           intensity=intensity,
                           raw=raw, **top)
 

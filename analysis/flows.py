@@ -85,7 +85,8 @@ class FlowPlan:
     frame of the ``time`` reference; ``evidence_views``: views that get the static flow from
     every available reference; ``static_views``: views that get the static flow from the
     primary reference; ``intensity``: ``contact`` or ``fixed``; ``load_fraction``: of
-    the contact's median load, reached at the contact onset."""
+    the contact's median load, reached at the contact onset; ``static_every``: frames
+    between two static-flow computations (interpolated in between)."""
 
     primary: str
     reference_frame: int | None = None
@@ -93,6 +94,7 @@ class FlowPlan:
     static_views: tuple[str, ...] = ()
     intensity: str = "contact"
     load_fraction: float = 0.8
+    static_every: int = 1
 
 
 def primary_reference(setting: str, baseline_kind: str) -> str:
@@ -163,7 +165,7 @@ def compute(prepared, contacts: dict[str, list[tuple[int, int]]], fingers: list[
     def job(task):
         cf, v, act, wanted, intensity = task
         t0 = _time.perf_counter()
-        result = process_view(model, act, v, references=wanted, primary=plan.primary,
+        result = process_view(model, act, v, references=wanted, primary=plan.primary, static_every=plan.static_every,
                               intensity_range=intensity, keep_fields=keep_fields, progress=bar.update)
         return result, _time.perf_counter() - t0
 

@@ -148,7 +148,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
                        reference_frame=None if cfg.reference_time_s is None else
                        int(np.searchsorted(run.time, cfg.reference_time_s)),
                        evidence_views=tuple(cfg.slip.views), static_views=static_views(cfg, scheme),
-                       intensity=cfg.intensity, load_fraction=s.load_fraction)
+                       intensity=cfg.intensity, load_fraction=s.load_fraction, static_every=cfg.static_every)
     flows, flow_s = fl.compute(prepared, contacts, run.fingers, model, margin, signal, thresholds, s.settle_frames,
                                plan, keep_fields=cfg.save_fields, progress=cfg.progress,
                                workers=cfg.workers or fl.available_workers())

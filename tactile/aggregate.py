@@ -41,6 +41,18 @@ class FlowAggregates:
     confidence: np.ndarray
 
 
+def interpolate(agg: FlowAggregates, at: np.ndarray, n: int) -> FlowAggregates:
+    """Aggregates known at frames ``at`` (ascending, with 0 and n − 1) on every frame 0..n−1:
+    mean flow, divergence, curl and confidence interpolated linearly, magnitude and direction
+    from the interpolated mean."""
+    t = np.arange(n)
+    mean = np.stack([np.interp(t, at, agg.mean[:, i]) for i in range(agg.mean.shape[1])], axis=1)
+    return FlowAggregates(mean=mean, magnitude=np.hypot(mean[:, 0], mean[:, 1]),
+                          direction=np.arctan2(mean[:, 1], mean[:, 0]),
+                          divergence=np.interp(t, at, agg.divergence), curl=np.interp(t, at, agg.curl),
+                          confidence=np.interp(t, at, agg.confidence))
+
+
 def aggregate_flow(flow, mask, *, noise: float = 0.05) -> FlowAggregates:
     """Summarise a flow field (T, H, W, 2) over the footprint ``mask`` (H, W) bool.
 

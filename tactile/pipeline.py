@@ -184,7 +184,7 @@ class ViewResult:
 
 def process_view(model: TactileModel, activation, view: str, reference: int | None = None, *,
                  references: dict | None = None, primary: str | None = None, intensity_range=None,
-                 keep_fields: bool = False, progress=None) -> ViewResult:
+                 keep_fields: bool = False, progress=None, static_every: int = 1) -> ViewResult:
     """Frames, dynamic and static flow, and their aggregates for one finger and one view.
 
     >>> import numpy as np
@@ -204,8 +204,12 @@ def process_view(model: TactileModel, activation, view: str, reference: int | No
             zero activation): one static flow per entry.
         primary: the reference :attr:`ViewResult.static` reports (default: the first).
         intensity_range: (low, high) kΩ mapped to 0..255 (default: the config's).
-        keep_fields: also return the full (T, H, W, 2) flow fields.
+        keep_fields: also return the full (T, H, W, 2) flow fields (every frame: ``static_every``
+            is then 1).
         progress: optional callable taking the number of frames just processed.
+        static_every: the static flow (a displacement from a fixed reference, which changes
+            slowly) is computed on every ``static_every``-th frame, the last and each reference
+            frame, and its aggregates interpolated linearly in between.
     """
     activation = finite_array("activation", activation, ndim=2, last=24, min_len=1)
     if view not in model.plans:
@@ -231,10 +235,13 @@ def process_view(model: TactileModel, activation, view: str, reference: int | No
     primary = primary if primary is not None else next(iter(refs), None)
     result = ViewResult(frames=u8, dynamic=aggregate.aggregate_flow(dyn, plan.mask, noise=c.noise), references=refs,
                         primary=primary, intensity_range=rng, dynamic_field=dyn if keep_fields else None)
+    every = 1 if keep_fields else max(1, int(static_every))
     for name, index in refs.items():
-        ref = np.zeros(plan.shape, np.uint8) if index is None else index
-        sta = flow.static_flow(u8, ref, config=c.flow)
-        result.statics[name] = aggregate.aggregate_flow(sta, plan.mask, noise=c.noise)
+        ref = np.zeros(plan.shape, np.uint8) if index is None else u8[index]
+        at = np.unique(np.r_[np.arange(0, n, every), n - 1, [] if index is None else [index]]).astype(int)
+        sta = flow.static_flow(u8[at], ref, config=c.flow)
+        agg = aggregate.aggregate_flow(sta, plan.mask, noise=c.noise)
+        result.statics[name] = agg if len(at) == n else aggregate.interpolate(agg, at, n)
         if keep_fields and name == primary:
             result.static_field = sta
     return result
