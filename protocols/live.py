@@ -130,8 +130,8 @@ def tactile_config(analysis: dict, views) -> TactileConfig:
     tk = dict(analysis.get("tactile") or {})
     if isinstance(tk.get("intensity_range"), str):
         tk.pop("intensity_range")
-    fk = {k: v for k, v in dict(analysis.get("flow") or {}).items()
-          if k not in ("dis", "tvl1", "reference", "reference_time_s", "static")}
+    flow_keys = {f.name for f in fields(FlowConfig)} - {"dis", "tvl1"}       # not the offline-only keys
+    fk = {k: v for k, v in dict(analysis.get("flow") or {}).items() if k in flow_keys}
     known = {f.name for f in fields(TactileConfig)}
     unknown = sorted(set(tk) - known)
     if unknown:
