@@ -124,6 +124,14 @@ def test_invalid_samples_are_bridged_alike_in_any_stretch(seed, a, n):
     whole = read(0, T)
     np.testing.assert_array_equal(read(a, b), whole[a:b])
     np.testing.assert_array_equal(read(a, b, 0), whole[a:b, 0])
+    # the same from a store, through a screening that dropped frames (every 7th)
+    import xarray as xr
+    keep = np.arange(T + T // 6)
+    keep = keep[keep % 7 != 3][:T]
+    stored = np.zeros((keep[-1] + 1, 2, 24))
+    stored[keep] = counts
+    source = StoredElectrodes(xr.Variable(("time", "finger", "taxel"), stored), keep, RuntimeError)
+    np.testing.assert_array_equal(ImpedanceReader(source, valid, [0, 1])(a, b), whole[a:b])
 
 
 def test_the_envelope_of_stretches_is_the_envelope_of_the_whole():
