@@ -8,6 +8,7 @@ cols × rows = look, a positive ``curl`` is a rotation counter-clockwise about t
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numba
@@ -39,6 +40,12 @@ class FlowAggregates:
     divergence: np.ndarray
     curl: np.ndarray
     confidence: np.ndarray
+
+
+def concatenate(parts: list[FlowAggregates]) -> FlowAggregates:
+    """The aggregates of consecutive stretches of frames as those of the whole."""
+    return FlowAggregates(*(np.concatenate([getattr(a, f.name) for a in parts])
+                            for f in dataclasses.fields(FlowAggregates)))
 
 
 def interpolate(agg: FlowAggregates, at: np.ndarray, n: int) -> FlowAggregates:

@@ -231,20 +231,47 @@ def process_view(model: TactileModel, activation, view: str, reference: int | No
         if progress:
             progress(stop - start)
 
-    dyn = flow.dynamic_flow(u8, config=c.flow)
     primary = primary if primary is not None else next(iter(refs), None)
-    result = ViewResult(frames=u8, dynamic=aggregate.aggregate_flow(dyn, plan.mask, noise=c.noise), references=refs,
-                        primary=primary, intensity_range=rng, dynamic_field=dyn if keep_fields else None)
+    dyn = flow.dynamic_flow(u8, config=c.flow) if keep_fields else None
+    dynamic = aggregate.aggregate_flow(dyn, plan.mask, noise=c.noise) if keep_fields else _dynamic_aggregates(u8, plan, c)
+    result = ViewResult(frames=u8, dynamic=dynamic, references=refs, primary=primary, intensity_range=rng,
+                        dynamic_field=dyn)
     every = 1 if keep_fields else max(1, int(static_every))
     for name, index in refs.items():
         ref = np.zeros(plan.shape, np.uint8) if index is None else u8[index]
         at = np.unique(np.r_[np.arange(0, n, every), n - 1, [] if index is None else [index]]).astype(int)
-        sta = flow.static_flow(u8[at], ref, config=c.flow)
-        agg = aggregate.aggregate_flow(sta, plan.mask, noise=c.noise)
+        if keep_fields:
+            sta = flow.static_flow(u8, ref, config=c.flow)
+            agg = aggregate.aggregate_flow(sta, plan.mask, noise=c.noise)
+            if name == primary:
+                result.static_field = sta
+        else:
+            agg = _static_aggregates(u8[at], ref, plan, c)
         result.statics[name] = agg if len(at) == n else aggregate.interpolate(agg, at, n)
-        if keep_fields and name == primary:
-            result.static_field = sta
     return result
+
+
+FIELD_FRAMES = 512
+"""Frames of dense flow field (~9 kB each at 28 × 40) held at once: a long contact's fields are
+computed and aggregated this many frames at a time (the same values: each frame's aggregates
+are its own)."""
+
+
+def _dynamic_aggregates(u8: np.ndarray, plan, c) -> aggregate.FlowAggregates:
+    """Aggregates of the flow between consecutive frames of ``u8`` (T, H, W), a stretch at a time."""
+    parts = []
+    for s in range(0, len(u8), FIELD_FRAMES):
+        e = min(len(u8), s + FIELD_FRAMES)
+        fields = flow.dynamic_flow(u8[max(s - 1, 0):e], config=c.flow)[min(s, 1):]   # from the frame before
+        parts.append(aggregate.aggregate_flow(fields, plan.mask, noise=c.noise))
+    return aggregate.concatenate(parts)
+
+
+def _static_aggregates(frames: np.ndarray, ref: np.ndarray, plan, c) -> aggregate.FlowAggregates:
+    """Aggregates of the flow from ``ref`` (H, W) to each of ``frames`` (N, H, W), a stretch at a time."""
+    return aggregate.concatenate([
+        aggregate.aggregate_flow(flow.static_flow(frames[s:s + FIELD_FRAMES], ref, config=c.flow), plan.mask,
+                                 noise=c.noise) for s in range(0, len(frames), FIELD_FRAMES)])
 
 
 def activation_from_counts(counts, baseline_impedance, model: TactileModel) -> np.ndarray:

@@ -62,3 +62,21 @@ def test_bad_input_names_the_argument(model, cache_dir):
         TactileModel.build(TactileConfig(views=("bottom", "top")), cache_dir=cache_dir)
     with pytest.raises(ValueError, match="taxels"):
         TactileModel.build(TactileConfig(), taxels=np.zeros((20, 3)), cache_dir=cache_dir)
+
+
+def test_flow_aggregated_a_stretch_at_a_time_is_the_flow_aggregated_whole(model, rng, monkeypatch):
+    """A long contact's dense fields are computed and aggregated FIELD_FRAMES at a time: the
+    aggregates are those of the whole window, bit for bit, across the stretches' seams."""
+    import dataclasses
+
+    import tactile.pipeline as tp
+    act = np.clip(np.cumsum(rng.normal(0, 0.05, (300, 24)), axis=0), 0, None)
+    refs = {"unloaded": None, "contact_onset": 40}
+    whole = process_view(model, act, "bottom", references=refs, keep_fields=True)
+    monkeypatch.setattr(tp, "FIELD_FRAMES", 37)
+    pieces = process_view(model, act, "bottom", references=refs)
+    assert pieces.dynamic_field is None
+    for f in dataclasses.fields(aggregate.FlowAggregates):
+        np.testing.assert_array_equal(getattr(pieces.dynamic, f.name), getattr(whole.dynamic, f.name))
+        for r in refs:
+            np.testing.assert_array_equal(getattr(pieces.statics[r], f.name), getattr(whole.statics[r], f.name))
