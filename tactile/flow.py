@@ -82,6 +82,10 @@ class FlowEstimator:
         """Flow (H, W, 2) float32 in pixels that carries ``prev`` (H, W uint8) onto ``nxt``."""
         c = self.config
         if self._algo is None:
+            if not (prev.any() or nxt.any()):
+                # Farnebäck between two empty frames is exactly zero (tested); the stretches
+                # before and after a press are mostly empty frames
+                return np.zeros(prev.shape + (2,), np.float32)
             return self._farneback(prev, nxt, None, c.pyr_scale, c.levels, c.winsize,
                                                 c.iterations, c.poly_n, c.poly_sigma, c.flags)
         return self._algo.calc(prev, nxt, None)

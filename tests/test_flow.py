@@ -141,3 +141,22 @@ def test_fused_aggregation_equals_the_matrix_form(rng):
         assert agg.confidence[0] == 0.0 and agg.mean.dtype == np.float64
     with pytest.raises(ValueError, match="mask"):
         aggregate.aggregate_flow(field, np.zeros((28, 40), bool))
+
+
+@pytest.mark.parametrize("flags,levels", [(0, 3), (256, 3), (0, 1)])   # 256: OPTFLOW_FARNEBACK_GAUSSIAN
+def test_farneback_between_empty_frames_is_skipped_and_exactly_zero(flags, levels):
+    """The estimator skips Farnebäck between two empty frames; OpenCV gives exactly zero there,
+    so a flow with the shortcut equals one without it, to the bit."""
+    import cv2
+    empty = np.zeros((28, 40), np.uint8)
+    c = flow.FlowConfig(flags=flags, levels=levels)
+    direct = cv2.calcOpticalFlowFarneback(empty, empty, None, c.pyr_scale, c.levels, c.winsize, c.iterations,
+                                          c.poly_n, c.poly_sigma, c.flags)
+    assert not direct.any()
+    got = flow.FlowEstimator(c)(empty, empty)
+    assert got.dtype == direct.dtype and got.shape == direct.shape and not got.any()
+    pressed = empty.copy()
+    pressed[10:16, 12:20] = 180                   # one empty frame of the two: computed, not skipped
+    assert np.array_equal(flow.FlowEstimator(c)(empty, pressed),
+                          cv2.calcOpticalFlowFarneback(empty, pressed, None, c.pyr_scale, c.levels, c.winsize,
+                                                       c.iterations, c.poly_n, c.poly_sigma, c.flags))
