@@ -86,7 +86,12 @@ def _rows(n: int, height: float, top_in: float = 0.45, bottom_in: float = 0.55):
     return fig
 
 
-def _decimated(t: np.ndarray, y: np.ndarray, bins: int = 2000) -> tuple[np.ndarray, np.ndarray]:
+FIGURE_BINS = 800
+"""Stretches a time series is drawn by (each by its lowest and highest value): about one per
+pixel column of an 11-inch figure at 90 dpi; more points would draw the same picture slower."""
+
+
+def _decimated(t: np.ndarray, y: np.ndarray, bins: int = FIGURE_BINS) -> tuple[np.ndarray, np.ndarray]:
     """``(t, y)`` with at most ``2·bins`` points: each stretch of frames by its lowest and highest
     value, in time order (a line drawn through them looks, at a figure's resolution, as the
     whole record would); a record of at most ``2·bins`` frames as it is."""
@@ -96,8 +101,12 @@ def _decimated(t: np.ndarray, y: np.ndarray, bins: int = 2000) -> tuple[np.ndarr
     return _interleave(t, edges, np.minimum.reduceat(y, edges[:-1]), np.maximum.reduceat(y, edges[:-1]))
 
 
-def _interleave(t: np.ndarray, edges: np.ndarray, low: np.ndarray, high: np.ndarray):
-    """The (2·bins,) times and values of stretches ``edges`` drawn by their lowest then highest value."""
+def _interleave(t: np.ndarray, edges: np.ndarray, low: np.ndarray, high: np.ndarray, bins: int = FIGURE_BINS):
+    """The (2·n,) times and values of stretches ``edges`` drawn by their lowest then highest
+    value, neighbouring stretches merged to at most ``bins``."""
+    if len(low) > bins:
+        g = np.unique(np.linspace(0, len(low), bins + 1).astype(np.int64))
+        edges, low, high = edges[g], np.minimum.reduceat(low, g[:-1]), np.maximum.reduceat(high, g[:-1])
     tt = np.repeat(t[edges[:-1]], 2)
     tt[1::2] = t[edges[1:] - 1]
     yy = np.empty((2 * len(low),) + low.shape[1:])
@@ -270,13 +279,19 @@ def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
                    for sg, *_ in picked for (v, kind), agg in (rows.get(sg.id) or {}).get("flows", {}).items()
                    if kind == "dynamic"] + [1e-6])
     scale = biggest / (0.25 * min(h_px, w_px))               # px/frame per drawn px
-    # fixed layout in inches: per row a title, the frame, its axis labels and the summary line
-    top_in, row_in, img_in, col_in = 0.75, 2.9, 1.85, 3.6
+    # fixed layout in inches: a heading per view (its axes), then per row a title, the frame and
+    # the summary line
+    top_in, row_in, img_in, col_in = 1.05, 2.55, 1.85, 3.6
     W, H = col_in * len(views), top_in + row_in * n + 0.1
     fig = _figure(W, H)
     axes = np.array([[fig.add_axes([(0.55 + col_in * j) / W, (H - top_in - row_in * r - 0.3 - img_in) / H,
                                     (col_in - 0.75) / W, img_in / H]) for j in range(len(views))]
                      for r in range(n)])
+    for j, v in enumerate(views):
+        plan = model.plans[v]
+        fig.text((0.55 + col_in * j) / W, (H - top_in + 0.12) / H,
+                 f"{v} view: → sensor {_axis(plan.cols)} ({plan.shape[1] * plan.mm_per_px:.0f} mm wide), "
+                 f"↓ sensor {_axis(plan.rows)}", fontsize=8, va="bottom")
     noise = model.config.noise
     for r, ((sg, cf, s, e), mean) in enumerate(zip(picked, fields)):
         row = rows.get(sg.id) or {}
@@ -296,7 +311,7 @@ def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
                 ax.quiver(xx[keep], yy[keep], m[::step, ::step, 0][keep], m[::step, ::step, 1][keep], color="C1",
                           angles="xy", scale_units="xy", scale=scale, width=0.006)
             agg = row.get("flows", {}).get((v, "dynamic"))
-            title = f"{sg.finger} {v}"
+            title = sg.finger
             if agg is not None:
                 px = agg["magnitude"] / (plan.mm_per_px * rate)       # px/frame
                 title += f": {agg['magnitude']:.2f} mm/s, conf {agg['confidence']:.2f}"
@@ -308,9 +323,7 @@ def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
                 else:
                     title += " (no arrow: below noise)"
             ax.set_title(title, fontsize=8)
-            ax.set_xlabel(f"→ sensor {_axis(plan.cols)} ({plan.shape[1] * plan.mm_per_px:.0f} mm wide)", fontsize=8)
-            ax.set_ylabel(f"↓ sensor {_axis(plan.rows)}", fontsize=8)
-            ax.set_xticks([])             # pixel indices tell nothing; the labels say the axes
+            ax.set_xticks([])             # pixel indices tell nothing; the headings say the axes
             ax.set_yticks([])
         t0, t1 = a.run.time[sg.start], a.run.time[min(sg.stop, len(a.run.time) - 1)]
         fig.text(0.1 / W, (H - top_in - row_in * (r + 1) + 0.12) / H,

@@ -1,12 +1,13 @@
 """Speed figures of issue 15 as JSON lines (min and median of several runs, paired ratios).
 
-    python benchmarks/bench_speed.py [--repeat 3] [--only analysis,workers,startup,dis] [--keep DIR]
+    python benchmarks/bench_speed.py [--repeat 3] [--only analysis,workers,startup,dryrun,dis] [--keep DIR]
 
 - ``analysis``: CPU of ``analyze_run`` (one worker, figures on) of the 60 s five-finger store
   of ``bench_analysis.py`` against the bare dynamic Farnebäck calls on the same frames, each
   repetition paired (ratio = analysis CPU / bare flow CPU); the figures' CPU alone.
 - ``workers``: wall time of the same analysis (figures off) with 1, 2, … the cores available.
 - ``startup``: ``tactile-run --help`` and ``tactile-analyze --help`` (wall and CPU of the child).
+- ``dryrun``: the default dry run ``tactile-run progress=false`` (wall and CPU of the child).
 - ``dis``: each flow method / DIS preset on a simulated straws sweep and pour: flow CPU and the
   scores that the presets move (sweep direction error, pour phase onsets).
 CPU is ``time.process_time`` (every thread of the process); the machine's other load shows in
@@ -128,6 +129,15 @@ def bench_startup(repeat: int) -> None:
         emit({"bench": f"{cmd}_import_s", "value": round(total / 1e6, 4)})
 
 
+def bench_dryrun(work: Path, repeat: int) -> None:
+    """The README's main job, ``tactile-run progress=false`` (simulation, recording, analysis,
+    figures), in a child process: its wall and CPU."""
+    runs = [_child([str(BIN / "tactile-run"), "progress=false", f"hydra.run.dir={work / f'dry{i}'}"])
+            for i in range(repeat)]
+    emit(stats("dry_run_wall_s", [w for w, _ in runs], target=8.0))
+    emit(stats("dry_run_cpu_s", [c for _, c in runs]))
+
+
 def simulated(protocol: str, work: Path) -> Path:
     d = work / f"sim_{protocol}"
     if not (d / "run.zarr").exists():
@@ -156,7 +166,7 @@ def bench_dis(work: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--only", default="analysis,workers,startup,dis")
+    ap.add_argument("--only", default="analysis,workers,startup,dryrun,dis")
     ap.add_argument("--keep", help="work directory to keep (default: a temporary one)")
     args = ap.parse_args()
     parts = set(args.only.split(","))
@@ -173,6 +183,8 @@ def main() -> None:
             bench_analysis(store, work, args.repeat)
         if "workers" in parts:
             bench_workers(store, work, args.repeat)
+    if "dryrun" in parts:
+        bench_dryrun(work, args.repeat)
     if "dis" in parts:
         bench_dis(work)
     if not args.keep:
