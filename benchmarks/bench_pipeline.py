@@ -79,7 +79,7 @@ def ours(model, act):
                               c.poly_n, c.poly_sigma, c.flags)
             est_t["flow"] += time.perf_counter() - t0
             flow_calls += n - 1
-            _, dt = timed(aggregate.aggregate_flow, field, plan.mask, model.config.noise)
+            _, dt = timed(aggregate.aggregate_flow, field, plan.mask, noise=model.config.noise)
             est_t["aggregate"] += dt
     return {"smoothing": t_smooth, **est_t}, flow_calls
 
