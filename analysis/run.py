@@ -170,14 +170,15 @@ def _analyse_and_write(store_path: Path, cfg, console) -> dict:
                                                   f"{cfg.max_segment_figures}"}
         if score is not None:
             (staging / "score.json").write_text(results.dumps(score))
-        (staging / "summary.json").write_text(results.dumps(summary))
+        text = results.dumps(summary)
+        (staging / "summary.json").write_text(text)
         previous = _previous_record(run_dir)
         results.swap_in(staging, run_dir, previous)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
     _report(console, run_dir, summary, score)
-    return json.loads(results.dumps(summary))
+    return json.loads(text)
 
 
 def _previous_record(run_dir: Path) -> dict | None:
