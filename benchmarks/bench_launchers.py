@@ -4,7 +4,7 @@
 
 Records ``--runs`` simulated runs once (``tactile-run -m hardware.seed=1,2,... analyze=false``;
 ``wait``: a 2 s run with no contact, whose analysis is mostly start-up; ``straws``: the default
-straws sweep, ~50 s of contacts), then times ``tactile-analyze`` over their directory, each way
+straws sweep, three straws crossed), then times ``tactile-analyze`` over their directory, each way
 ``--repeat`` times (wall time of the child process, min and median; ``vs_one_process`` is the
 min against that of ``run=DIR``, all runs in one process):
 
