@@ -2,56 +2,102 @@
 
     tactile-analyze run=outputs/2026-01-01/12-00-00_straws_sweep/run.zarr
     tactile-analyze run=outputs/2026-01-01 analysis.flow.method=dis    # every run.zarr below
-    tactile-analyze -m run=A/run.zarr,B/run.zarr                        # a list of runs
+    tactile-analyze -m run=outputs/2026-01-01                          # one job per run.zarr below
+    tactile-analyze -m 'run=outputs/**/run.zarr' batch=8 hydra/launcher=joblib   # 8 runs per job
+
+``run=`` names run stores: a ``run.zarr``, a directory (every ``run.zarr`` below it), a
+shell-style pattern (``*``, ``?``, ``**`` for any depth; :func:`find_stores`), or a list of
+these (``run=[A,B]``). Without ``-m`` they are analysed one after another in this process;
+with ``-m`` they become jobs (:func:`runs_as_jobs`), ``batch=N`` runs each, for any Hydra
+launcher. Each job leaves its result on disk (:mod:`cliapp.jobresults`).
 
 Exit status: 0 analysed, 2 bad input or config (nothing written), 1 analysis failed, 3
-interrupted (Ctrl-C or SIGTERM; nothing partial is left). Errors are one line; ``verbose=true``
-adds the traceback. Several runs also write ``analysis_summary.csv`` / ``.md`` (one row per
-run: the ``headline`` of its summary): in the directory given as ``run=``, or with ``-m`` in
-the sweep directory (``multirun/<date>/<time>_analyze/``); nothing goes to the current directory.
+interrupted (Ctrl-C or SIGTERM; nothing partial is left); a sweep's is its highest job's.
+Errors are one line; ``verbose=true`` adds the traceback. Several runs also write
+``analysis_summary.csv`` / ``.md`` (one row per run: the ``headline`` of its summary): in the
+directory given as ``run=`` (a pattern: the directory it starts from), or with ``-m`` in the
+sweep directory (``multirun/<date>/<time>_analyze/``); nothing goes to the current directory.
 """
 
 from __future__ import annotations
 
 import csv
+import glob
+import os
+import re
 import sys
 import traceback
 from pathlib import Path
 
 import hydra
-from hydra.experimental.callback import Callback
+from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
+
+import cliapp.jobresults as jobresults
 
 from .config import AnalysisConfigError
 from .load import AnalysisInputError
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 BAD_INPUT, FAILED, INTERRUPTED = 2, 1, 3
-_state = {"code": 0, "rows": []}
+MULTIRUN_FLAGS = ("-m", "--multirun")
 
 
-def find_stores(path: Path) -> list[Path]:
-    """``path`` itself if it is a run store, else every ``run.zarr`` below it (sorted)."""
+def find_stores(spec: str) -> list[Path]:
+    """The run stores ``spec`` names: itself if it is a run store; every ``run.zarr`` below it
+    if it is a directory (sorted); for a shell-style pattern that is not an existing path
+    (``*``, ``?``, ``[...]``; ``**`` any depth), the stores of every directory it matches
+    (sorted, each once); else ``[spec]`` (its analysis says what is wrong with it)."""
+    path = Path(spec)
+    if not path.exists() and glob.has_magic(spec):
+        matched = (find_stores(m) for m in sorted(glob.glob(spec, recursive=True)) if Path(m).is_dir())
+        return list(dict.fromkeys(s for stores in matched for s in stores))
     if (path / "zarr.json").is_file() or path.suffix == ".zarr":
         return [path]
     if path.is_dir():
-        return sorted(p for p in path.rglob("run.zarr") if p.is_dir())
+        return _stores_below(path)
     return [path]
 
 
-def analyse_paths(run: str, analysis_cfg, verbose: bool = False, console=print) -> int:
-    """Analyse one run store or every run store under a directory; never raises. Exit code."""
+def _stores_below(root: Path) -> list[Path]:
+    """Every ``run.zarr`` directory below ``root``, sorted; the walk skips the inside of
+    ``*.zarr`` stores (hundreds of chunk directories each, and never a run)."""
+    found = []
+    for here, dirs, _ in os.walk(root):
+        found += [Path(here) / "run.zarr"] if "run.zarr" in dirs else []
+        dirs[:] = [d for d in dirs if not d.endswith(".zarr")]
+    return sorted(found)
+
+
+def table_dir(spec: str) -> Path:
+    """Where the table of the runs ``spec`` names goes: the directory itself, or for a pattern
+    the directory before its first wildcard."""
+    path = Path(spec)
+    if path.exists():
+        return path
+    first = next((i for i, part in enumerate(path.parts) if glob.has_magic(part)), len(path.parts))
+    return Path(*path.parts[:first]) if first else Path(".")
+
+
+def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
+                  table: bool = True) -> tuple[int, list[dict]]:
+    """Analyse the run stores ``spec`` names (:func:`find_stores`); never raises. The exit
+    code and one row per run (``run``, ``result``, then the summary's ``headline``); with
+    ``table`` and several runs, their table is written (:func:`table_dir`)."""
     from .run import analyze_run
-    stores = find_stores(Path(run))
+    stores = find_stores(spec) if spec else []
     if not stores:
-        print(f"error: {run}: no run.zarr found", file=sys.stderr)
-        return BAD_INPUT
-    code = 0
+        print(f"error: run={spec}: no run.zarr found; expected a run.zarr, a directory or a pattern of runs",
+              file=sys.stderr)
+        return BAD_INPUT, []
+    code, rows = 0, []
     for store in stores:
         row = {"run": str(store)}
+        rows.append(row)
         try:
             summary = analyze_run(store, analysis_cfg, console=console)
             row["result"] = "analysed"
-            row.update({k: v for k, v in summary.get("headline", {}).items()})
+            row.update(summary.get("headline", {}))
         except (AnalysisInputError, AnalysisConfigError) as exc:
             _report(exc, "error", verbose)
             row["result"] = f"error: {exc}"
@@ -64,12 +110,10 @@ def analyse_paths(run: str, analysis_cfg, verbose: bool = False, console=print) 
             print(f"analysis of {store} interrupted; analyse it again with tactile-analyze run={store}",
                   file=sys.stderr)
             row["result"] = "interrupted"
-            _state["rows"].append(row)
-            return INTERRUPTED
-        _state["rows"].append(row)
-    if len(stores) > 1:
-        write_table(Path(run), _state["rows"][-len(stores):])
-    return code
+            return INTERRUPTED, rows
+    if table and len(stores) > 1:
+        write_table(table_dir(spec), rows)
+    return code, rows
 
 
 def _report(exc: Exception, what: str, verbose: bool) -> None:
@@ -94,12 +138,24 @@ def write_table(root: Path, rows: list[dict]) -> None:
     print(f"summary of {len(rows)} runs: {root / 'analysis_summary.md'}")
 
 
-class SummaryTable(Callback):
-    """After ``-m``: one table of every analysed run."""
+class SummaryTable(jobresults.SweepResults):
+    """After ``-m``: one table of every run of the sweep, from the jobs' results on disk; a
+    run its job did not report (the job's process died, the job was interrupted, or the
+    launcher stopped the sweep before the job started) is a row saying so."""
 
-    def on_multirun_end(self, config, **kwargs) -> None:
-        if len(_state["rows"]) > 1:
-            write_table(Path(config.hydra.sweep.dir), _state["rows"])
+    def summarise(self, config, results: list[dict]) -> None:
+        rows = []
+        for r in results:
+            rows += r["rows"]
+            reported = {row["run"] for row in r["rows"]}
+            why = (f"failed: its job ({r['job']}) left no result" if r["code"] is None
+                   else f"not analysed: its job ({r['job']}) stopped before it")
+            rows += [{"run": run, "result": why} for run in run_specs(r["overrides"]) if run not in reported]
+        reported = {row["run"] for row in rows}
+        rows += [{"run": run, "result": "not analysed: the sweep stopped before its job started"}
+                 for run in run_specs(config.hydra.overrides.task) if run not in reported]
+        if rows:
+            write_table(Path(config.hydra.sweep.dir), rows)
 
 
 @hydra.main(config_path=str(CONF_DIR), config_name="analyze", version_base=None)
@@ -107,27 +163,100 @@ def _app(cfg) -> None:
     from omegaconf import OmegaConf
     run = OmegaConf.select(cfg, "run", default=None)
     if run is None or OmegaConf.is_missing(cfg, "run"):
-        print("error: run: expected run=PATH (a run.zarr or a directory of runs)", file=sys.stderr)
-        _state["code"] = BAD_INPUT
+        print("error: run: expected run=PATH (a run.zarr, a directory or a pattern of runs)", file=sys.stderr)
+        jobresults.record(BAD_INPUT)
         return
-    _state["code"] = max(_state["code"], analyse_paths(str(run), cfg.analysis, bool(cfg.get("verbose"))))
+    sweep = HydraConfig.get().mode == RunMode.MULTIRUN          # the sweep's table, not one per job
+    code, rows = 0, []
+    for spec in (run if OmegaConf.is_list(run) else [run]):
+        c, r = analyse_paths(str(spec), cfg.analysis, bool(cfg.get("verbose")), table=not sweep)
+        code, rows = max(code, c), rows + r
+        if c == INTERRUPTED:
+            break
+    jobresults.record(code, rows)
+
+
+# ----------------------------------------------------------------------------- runs as jobs
+def runs_as_jobs(argv: list[str]) -> list[str]:
+    """With ``-m``, ``run=`` rewritten before Hydra reads it into one job per ``batch=N`` run
+    stores: ``run=[A,B],[C,D],[E]``, a sweep over lists, every path quoted (:func:`quoted`), so
+    any character in a path is safe. Every store named, found below a directory or matched by
+    a pattern (:func:`find_stores`), in order, each once. Without ``-m`` (or ``run=``), or if
+    Hydra's parser refuses the override (Hydra then says why), ``argv`` is returned as it is."""
+    at = [i for i, a in enumerate(argv) if _is_run(a)]
+    if not at or not set(MULTIRUN_FLAGS) & set(argv):
+        return argv
+    try:
+        specs = run_specs(argv)
+    except Exception:                                  # noqa: BLE001 - Hydra's one line says what is wrong
+        return argv
+    batch = _batch(argv)
+    stores = []
+    for spec in specs:
+        found = find_stores(spec) if spec else []
+        if not found:
+            _bad(f"run={spec}: no run.zarr found; expected a run.zarr, a directory or a pattern of runs")
+        stores += [str(s) for s in found]
+    stores = list(dict.fromkeys(stores))
+    jobs = [stores[k:k + batch] for k in range(0, len(stores), batch)]
+    value = ",".join("[" + ",".join(quoted(s) for s in job) + "]" for job in jobs)
+    return [a for i, a in enumerate(argv) if i not in at] + [f"run={value}"]
+
+
+def run_specs(overrides) -> list[str]:
+    """Every value the ``run=`` overrides among ``overrides`` give, as the job will read them
+    (Hydra's parser, then OmegaConf's ``\\${`` escape): a value, a list, a sweep of values or
+    of lists, flattened in order."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.core.override_parser.types import ChoiceSweep, QuotedString
+    specs = []
+    for arg in filter(_is_run, overrides):
+        value = OverridesParser.create().parse_override(arg).value()
+        for v in (value.list if isinstance(value, ChoiceSweep) else [value]):
+            specs += [x.text if isinstance(x, QuotedString) else str(x) for x in (v if isinstance(v, list) else [v])]
+    return [spec.replace("\\${", "${") for spec in specs]
+
+
+def _is_run(arg: str) -> bool:
+    return arg.lstrip("+").split("=", 1)[0] == "run"
+
+
+def quoted(text: str) -> str:
+    """``text`` as a single-quoted value of Hydra's override grammar: a quote escaped, the
+    backslashes before a quote or the closing quote doubled (Hydra reads other backslashes as
+    they are), and ``${`` escaped for OmegaConf (no interpolation)."""
+    text = text.replace("${", "\\${")
+    return "'" + re.sub(r"(\\*)('|$)", lambda m: m[1] * 2 + ("\\'" if m[2] else ""), text) + "'"
+
+
+def _batch(argv: list[str]) -> int:
+    values = [a.split("=", 1)[1] for a in argv if a.lstrip("+").startswith("batch=")]
+    if not values:
+        return 1
+    if not values[-1].isdigit() or int(values[-1]) < 1:
+        _bad(f"batch={values[-1]}: expected the number of runs per job, a whole number from 1")
+    return int(values[-1])
+
+
+def _bad(line: str) -> None:
+    print(f"error: {line}", file=sys.stderr)
+    sys.exit(BAD_INPUT)
 
 
 def _refuse_glob(argv: list[str]) -> None:
     """Hydra's ``glob(...)`` picks among a key's config options, not files: ``run=glob(...)``
-    would sweep over nothing and exit 0. Refuse it with the forms that do what was meant."""
+    would sweep over nothing and exit 0. Refuse it with the form that does what was meant."""
     for arg in argv:
         if arg.lstrip("+").startswith("run=glob("):
-            print(f"error: {arg}: Hydra's glob() selects config options, not files; give the runs as "
-                  f"-m run=A,B, or a directory: run=DIR analyses every run.zarr below it", file=sys.stderr)
-            sys.exit(BAD_INPUT)
+            pattern = arg.split("glob(", 1)[1].rstrip(")")
+            _bad(f"{arg}: Hydra's glob() selects config options, not files; give the pattern itself: "
+                 f"-m 'run={pattern}' (one job per run; batch=N for N runs per job)")
 
 
 def main() -> None:
-    from cliapp.runner import run_app
     _refuse_glob(sys.argv[1:])
-    run_app(_app)                   # a config file is data: one line for a bad one, exit 2
-    sys.exit(_state["code"])
+    sys.argv[1:] = runs_as_jobs(sys.argv[1:])
+    sys.exit(jobresults.run(_app))   # a config file is data: one line for a bad one, exit 2
 
 
 if __name__ == "__main__":  # pragma: no cover

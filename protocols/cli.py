@@ -19,11 +19,11 @@ from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
-from hydra.types import RunMode
 from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
-from cliapp.runner import report, run_app
+import cliapp.jobresults as jobresults
+from cliapp.runner import report
 from runstore import RunStatus, rundir
 
 from .interrupts import Interrupts
@@ -33,7 +33,6 @@ log = logging.getLogger("tactile-run")
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 EXIT_CODES = {s.value: int(s.exit_code) for s in RunStatus}
 BAD_INPUT = 2
-_exit = {"code": 0}
 
 
 def console(message: str) -> None:
@@ -147,7 +146,7 @@ def step_fields(kind: str) -> list[str] | None:
 
 @hydra.main(config_path=str(CONF_DIR), config_name="config", version_base=None)
 def _app(cfg) -> None:
-    _exit["code"] = max(_exit["code"], run_job(cfg))
+    jobresults.record(run_job(cfg))             # with -m on disk, so that any launcher brings it back
 
 
 def main() -> None:
@@ -158,8 +157,8 @@ def main() -> None:
     register()
     logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
     _interrupts.install()                    # the run owns Ctrl-C and SIGTERM (protocols.interrupts)
-    run_app(_app, step_fields=step_fields)   # protocols are data: no Hydra settings, no code
-    sys.exit(_exit["code"])
+    # protocols are data: no Hydra settings, no code; a sweep's exit status is its highest job's
+    sys.exit(jobresults.run(_app, step_fields=step_fields))
 
 
 class RunDirLock(Callback):
@@ -167,7 +166,8 @@ class RunDirLock(Callback):
     before Hydra writes anything there (:mod:`runstore.rundir`); a second ``tactile-run``
     on the same directory is refused with one line, exit 2, leaving the first one's files alone.
     A job that recorded nothing (``plan_only``, a bad config, a failed connection) leaves no
-    directory (:func:`runstore.rundir.remove_if_unused`)."""
+    directory (:func:`runstore.rundir.remove_if_unused`; with ``-m`` once the sweep has read
+    its jobs' results, in the process that started it)."""
 
     def on_run_start(self, config, **kwargs) -> None:
         self._take(config.hydra.run.dir)
@@ -176,14 +176,13 @@ class RunDirLock(Callback):
         rundir.release(config.hydra.run.dir)
         rundir.remove_if_unused(config.hydra.run.dir)      # nothing ran: no empty run directory
 
-    def on_job_end(self, config, job_return=None, **kwargs) -> None:
-        if config.hydra.mode == RunMode.MULTIRUN:
-            rundir.remove_if_unused(config.hydra.runtime.output_dir)
-
     def on_multirun_start(self, config, **kwargs) -> None:
         self._take(config.hydra.sweep.dir)
 
     def on_multirun_end(self, config, **kwargs) -> None:
+        for job in Path(config.hydra.sweep.dir).iterdir():
+            if job.is_dir():
+                rundir.remove_if_unused(job)
         rundir.release(config.hydra.sweep.dir)
         rundir.remove_if_unused(config.hydra.sweep.dir)
 
@@ -196,13 +195,15 @@ class RunDirLock(Callback):
             raise SystemExit(BAD_INPUT) from None      # Hydra turns a callback's exceptions into warnings
 
 
-class SweepSummary(Callback):
-    """At the end of a multirun, one table of every job: overrides, status, headline results.
+class SweepSummary(jobresults.SweepResults):
+    """At the end of a multirun, one table of every job that ran: overrides, status, headline
+    results, from the job directories on disk (any launcher).
 
-    Written to ``summary.csv`` and ``summary.md`` at the sweep's root directory.
+    Written to ``summary.csv`` and ``summary.md`` at the sweep's root directory; the sweep's
+    exit status is its highest job's (:mod:`cliapp.jobresults`).
     """
 
-    def on_multirun_end(self, config, **kwargs) -> None:
+    def summarise(self, config, results: list[dict]) -> None:
         root = Path(config.hydra.sweep.dir)
         rows = sweep_rows(root)
         if rows:

@@ -62,8 +62,9 @@ def release(directory) -> None:
         os.close(entry[0])                 # closing the descriptor releases the flock
 
 
-#: what Hydra and the lock put in a run directory before a run starts
-SETUP_FILES = (".hydra", LOCK_NAME, "multirun.yaml")
+#: what Hydra, the lock and a sweep's job result (cliapp.jobresults) put in a run directory
+#: whether or not a run started
+SETUP_FILES = (".hydra", LOCK_NAME, "multirun.yaml", "job_result.json")
 
 
 def remove_if_unused(directory) -> bool:
