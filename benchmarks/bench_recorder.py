@@ -75,7 +75,8 @@ def record_sweep(sim_s: float, directory: Path, seed: int = 0) -> dict:
     return {"bench": "recorder", "sim_s": round(simulated, 3), "wall_s": round(time.perf_counter() - wall0, 3),
             "sim_cpu_s": round(sim_cpu, 3), "recorder_cpu_s": round(rec_cpu, 3),
             "sim_cpu_per_sim_s": round(sim_cpu / simulated, 4), "recorder_cpu_per_sim_s": round(rec_cpu / simulated, 4),
-            "ratio": round(rec_cpu / sim_cpu, 3), "commits": store.n_commits, "cpus": os.cpu_count()}
+            "ratio": round(rec_cpu / sim_cpu, 3), "commits": store.n_commits,
+            "flush_ms_median": round(1000 * float(np.median(rec.flush_durations)), 1), "cpus": os.cpu_count()}
 
 
 def main(argv=None) -> int:

@@ -18,8 +18,8 @@ them and commits the store every ``flush_interval_s`` of wall time or :data:`RUN
 the run's own clock time, whichever comes first; a simulated clock faster than real time is
 held back while the last commit is :data:`MAX_BEHIND_S` behind (:meth:`Recorder.keep_up`),
 so a crash loses less than a second of either. (Each commit rewrites the last partial chunk
-of every array: commits every 0.75 s of run time cost a simulated run at 4× real time about
-a third of its speed; every 0.5 s, half.) :meth:`Recorder.stop` drains every stream, flushes, refits each clock
+of every array: commits every 0.75 s of run time cost a fast simulated run about 15–20 % of
+its speed, docs/run_store.md.) :meth:`Recorder.stop` drains every stream, flushes, refits each clock
 model on the whole run, rewrites the time coordinates and closes the store.
 
 Times in the store are seconds since run start: ``t0 = clock.now()`` at :meth:`start`,

@@ -7,6 +7,7 @@ module                 holds
 :mod:`.layout`         the layout (blocks, variables, dims, dtypes, units), the schema
                        version, the time-coordinate names
 :mod:`.writer`         :class:`RunStore`: create, append, commit (the commit protocol)
+:mod:`.appender`       the growing arrays' chunks and ``zarr.json`` files, written directly
 :mod:`.reader`         :func:`open_run` and the schema-version check
 :mod:`.recover`        ``tactile-recover``: close a store its writer never closed
 :mod:`.clockmodel`     device clock → host clock (lower-envelope fit)

@@ -5,10 +5,11 @@ One zarr v3 hierarchy per run (``run.zarr``), read as one ``xarray.DataTree``
 Every variable carries CF-style ``units`` and ``long_name`` attributes and names its
 dimensions through zarr v3 ``dimension_names``.
 
-Commit protocol (crash safety). Data are appended to the arrays in place (resize, then write
-the new rows: only the chunks they touch are rewritten, each file atomically by zarr's
-LocalStore) and become visible only at :meth:`RunStore.commit`, which rewrites the root
-``zarr.json`` with the *consolidated* metadata of every array (one atomic file replace).
+Commit protocol (crash safety). Data are appended to the arrays in place (the new rows:
+only the chunks they touch are rewritten, each file atomically, then the array's own
+``zarr.json``; :mod:`runstore.appender`) and become visible only at :meth:`RunStore.commit`,
+which rewrites the root ``zarr.json`` with the *consolidated* metadata of every array (one
+atomic file replace).
 Readers open the store through the consolidated metadata, so a reader, or a process opening
 the store after a SIGKILL, sees the state of the last commit: every variable of a group has
 the same length, and rows appended after it are invisible even though their chunks may be on
@@ -21,7 +22,7 @@ that ignores it sees every array at its own (possibly longer) length.
 
 from __future__ import annotations
 
-import asyncio
+import json
 import os
 import shutil
 import threading
@@ -34,6 +35,7 @@ import zarr
 
 from hardware.biotac import FINGERS
 
+from .appender import GrowingArray, MetadataTemplate, atomic_write, write_all
 from .jsonvalues import jsonable, utc_now
 from .status import RunStatus
 from .layout import SCHEMA_VERSION, STATUSES, Block, dim_sizes, fixed_coords, lab_streams, run_schema
@@ -63,9 +65,15 @@ class RunStore:
         self.streams = dict(streams or {})      # name -> hardware.streams.Stream: what the recorder fills
         self._root = root
         self._lock = threading.RLock()
-        self._arrays = {b: {v.name: root[f"{blk.group}/{v.name}"] for v in blk.vars}
-                        for b, blk in schema.items()}
-        self._length = {b: 0 for b in schema}
+        # the root zarr.json (consolidated metadata included) as last committed: a commit
+        # moves its shapes and attributes forward and rewrites it in one piece
+        self._root_meta = json.loads((self.path / "zarr.json").read_bytes())
+        consolidated = self._root_meta["consolidated_metadata"]["metadata"]
+        self._arrays = {b: {v.name: GrowingArray(self.path / blk.group / v.name, consolidated[f"{blk.group}/{v.name}"])
+                            for v in blk.vars} for b, blk in schema.items()}
+        self._length = {b: a[next(iter(a))].rows if a else 0 for b, a in self._arrays.items()}
+        self._relist = False           # groups or arrays changed through zarr: consolidate by listing
+        self._template: MetadataTemplate | None = None       # the root zarr.json, rows left open
         self._attrs: dict = {}
         self._attrs_dirty = False
         self.closed = False
@@ -137,6 +145,7 @@ class RunStore:
         """Set attributes of a group (written at once; published at the next commit)."""
         with self._lock:
             self._root[group].attrs.update(jsonable(attrs))
+            self._relist = True
 
     def append(self, block: str, data: dict[str, np.ndarray]) -> int:
         """Append rows to every variable of ``block``; returns the number of rows.
@@ -148,10 +157,10 @@ class RunStore:
         return self.append_many({block: data})[block]
 
     def append_many(self, blocks: dict[str, dict[str, np.ndarray]]) -> dict[str, int]:
-        """:meth:`append` for several blocks at once: every resize and chunk write runs
-        concurrently in one call into zarr's event loop (much cheaper than one call per
-        array when other threads hold the GIL). On failure every block is rolled back."""
-        items, counts = [], {}
+        """:meth:`append` for several blocks at once. Every array's new chunks are encoded
+        first (bad rows raise before anything is written), then written with the arrays' own
+        ``zarr.json`` (:mod:`runstore.appender`). On failure every block is rolled back."""
+        counts = {}
         for block, data in blocks.items():
             blk = self.schema[block]
             names = {v.name for v in blk.vars}
@@ -163,29 +172,15 @@ class RunStore:
             counts[block] = next(iter(lengths.values()))
         with self._lock:
             self._check_open()
-            for block, n in counts.items():
-                n0 = self._length[block]
-                if n:
-                    items += [(self._arrays[block][name], n0, np.asarray(a)) for name, a in blocks[block].items()]
-            try:
-                _run_async(_append_arrays(items))
-            except BaseException:
-                for block in counts:
-                    self._rollback(block, self._length[block])
-                raise
+            write_all([self._arrays[block][name].encode(self._length[block], a)
+                       for block, n in counts.items() if n for name, a in blocks[block].items()])
             for block, n in counts.items():
                 self._length[block] += n
         return counts
 
-    def _rollback(self, block: str, n0: int) -> None:
-        """Shrink every array of ``block`` back to ``n0`` rows after a failed append (best
-        effort: if even that fails, :meth:`commit` refuses to publish the block)."""
-        for arr in self._arrays[block].values():
-            try:
-                if arr.shape[0] != n0:
-                    arr.resize((n0, *arr.shape[1:]))
-            except Exception:
-                pass
+    def _zarr_array(self, block: str, var: str) -> zarr.Array:
+        """A zarr handle on ``var`` of ``block`` as its own ``zarr.json`` describes it now."""
+        return self._root[f"{self.schema[block].group}/{var}"]
 
     def rewrite(self, block: str, var: str, values: np.ndarray) -> None:
         """Overwrite the whole of ``var`` (e.g. a time coordinate after the final clock-model
@@ -193,11 +188,12 @@ class RunStore:
         crash in the middle leaves a mix of old and new values, never a torn chunk."""
         with self._lock:
             self._check_open()
-            arr = self._arrays[block][var]
+            arr = self._zarr_array(block, var)
             if len(values) != self._length[block] or arr.shape[0] != self._length[block]:
                 raise ValueError(f"{block}/{var}: rewrite with {len(values)} rows, store has {self._length[block]}")
             if len(values):
                 arr[:] = np.asarray(values)
+                self._arrays[block][var].forget_tail()
 
     def transform(self, block: str, var: str, source: str, fn, chunks_per_step: int = 16) -> None:
         """Overwrite ``var`` with ``fn(source)`` piece by piece (``chunks_per_step`` chunks at a
@@ -206,15 +202,16 @@ class RunStore:
         with self._lock:
             self._check_open()
             n, step = self._length[block], self.schema[block].chunk * chunks_per_step
-            dst, src = self._arrays[block][var], self._arrays[block][source]
+            dst, src = self._zarr_array(block, var), self._zarr_array(block, source)
             for i in range(0, n, step):
                 j = min(n, i + step)
                 dst[i:j] = fn(src[i:j])
+            self._arrays[block][var].forget_tail()
 
     def read(self, block: str, var: str, step: int = 1) -> np.ndarray:
         """Every ``step``-th row of ``var`` written so far (including uncommitted ones)."""
         with self._lock:
-            return self._arrays[block][var][: self._length[block]: step]
+            return self._zarr_array(block, var)[: self._length[block]: step]
 
     def write_tree(self, group: str, tree: dict, attrs: dict | None = None) -> None:
         """Write a nested dict of arrays/scalars/strings once as ``group`` (e.g. ``truth``):
@@ -223,6 +220,7 @@ class RunStore:
         Units come from the name (see :func:`_guess_units`)."""
         with self._lock:
             self._check_open()
+            self._relist = True
             g = self._root.require_group(group)
             g.attrs.update(jsonable(attrs or {}))
             _write_tree(g, tree, group.rsplit("/", 1)[-1])
@@ -233,6 +231,7 @@ class RunStore:
         values = np.asarray(values)
         with self._lock:
             self._check_open()
+            self._relist = True
             a = self._root[group].create_array(name, shape=values.shape, chunks=values.shape, dtype=values.dtype,
                                                dimension_names=list(dims),
                                                attributes=jsonable({"units": units, "long_name": long_name, **attrs}))
@@ -240,23 +239,46 @@ class RunStore:
 
     def commit(self) -> None:
         """Publish every append and attribute change: one atomic rewrite of the root
-        metadata (consolidated metadata of all nodes)."""
+        metadata (consolidated metadata of all nodes).
+
+        The consolidated metadata is the last commit's with the growing arrays' shapes (and
+        the root attributes) moved forward: the same JSON ``zarr.consolidate_metadata`` would
+        write, without listing and re-reading every node. After a change made through zarr
+        (group attributes, the ``truth`` tree, a fixed variable) the store is listed once,
+        by ``zarr.consolidate_metadata`` itself."""
         with self._lock:
             self._check_consistent()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")     # "consolidated metadata not in the v3 spec"
-                if self._attrs_dirty:
-                    # A handle opened on the consolidated metadata rewrites zarr.json with it,
-                    # so the root stays consolidated (at the previous commit) while the
-                    # attributes change; then the consolidation moves every shape forward.
-                    zarr.open_group(str(self.path), mode="r+", use_consolidated=None).update_attributes(self._attrs)
-                    self._attrs_dirty = False
-                zarr.consolidate_metadata(str(self.path))
+            if self._relist:
+                self._consolidate()
+            else:
+                if self._template is None or self._attrs_dirty:
+                    self._root_meta["attributes"].update(self._attrs)
+                    self._template = MetadataTemplate(self._root_meta, list(self._growing()))
+                atomic_write(self.path / "zarr.json", self._template.fill([a.rows for a in self._growing().values()]))
+            self._attrs_dirty = False
             self.n_commits += 1
+
+    def _growing(self) -> dict[str, GrowingArray]:
+        """Every growing array by its path in the store (``biotac/electrodes``)."""
+        return {f"{blk.group}/{name}": a for blk, arrays in zip(self.schema.values(), self._arrays.values())
+                for name, a in arrays.items()}
+
+    def _consolidate(self) -> None:
+        """Commit by zarr's own ``consolidate_metadata`` (lists and reads every node)."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")     # "consolidated metadata not in the v3 spec"
+            if self._attrs_dirty:
+                # A handle opened on the consolidated metadata rewrites zarr.json with it,
+                # so the root stays consolidated (at the previous commit) while the
+                # attributes change; then the consolidation moves every shape forward.
+                zarr.open_group(str(self.path), mode="r+", use_consolidated=None).update_attributes(self._attrs)
+            zarr.consolidate_metadata(str(self.path))
+        self._root_meta = json.loads((self.path / "zarr.json").read_bytes())
+        self._relist, self._template = False, None
 
     def _check_consistent(self) -> None:
         for b, arrays in self._arrays.items():
-            bad = {k: a.shape[0] for k, a in arrays.items() if a.shape[0] != self._length[b]}
+            bad = {k: a.rows for k, a in arrays.items() if a.rows != self._length[b]}
             if bad:
                 raise RuntimeError(f"run store {self.path}: block {b} has inconsistent lengths {bad} "
                                    f"(expected {self._length[b]}); refusing to commit")
@@ -308,36 +330,6 @@ def remove_debris(directory) -> list[Path]:
     for p in found:
         shutil.rmtree(p, ignore_errors=True)
     return found
-
-
-_loop: asyncio.AbstractEventLoop | None = None
-_loop_lock = threading.Lock()
-
-
-def _run_async(coro):
-    """Run ``coro`` on the writer's own event loop (one daemon thread per process) and return
-    its result: zarr's public asynchronous arrays batch every append of a flush into one
-    wait, much cheaper than one call per array when other threads hold the GIL."""
-    global _loop
-    with _loop_lock:
-        if _loop is None:
-            _loop = asyncio.new_event_loop()
-            threading.Thread(target=_loop.run_forever, name="runstore-io", daemon=True).start()
-    return asyncio.run_coroutine_threadsafe(coro, _loop).result()
-
-
-async def _append_arrays(items) -> None:
-    """Resize each zarr array to ``n0 + len(data)`` and write ``data`` at ``n0``, concurrently."""
-    async def one(arr, n0, data):
-        aa = arr.async_array
-        await aa.resize((n0 + len(data), *aa.shape[1:]))
-        await aa.setitem(slice(n0, n0 + len(data)), data)
-    # every write finishes before a failure is raised, so the caller's rollback cannot race
-    # a resize still in flight
-    results = await asyncio.gather(*(one(*it) for it in items), return_exceptions=True)
-    errors = [r for r in results if isinstance(r, BaseException)]
-    if errors:
-        raise errors[0]
 
 
 # ------------------------------------------------------------------------ tree writing

@@ -102,3 +102,18 @@ def tmpfs(mount: Path, size: str):
         yield mount
     finally:
         subprocess.run(["umount", "-l", str(mount)], capture_output=True)
+
+
+def wait_for_store(directory: Path, timeout_s: float = 60.0) -> None:
+    """Wait until a run started in ``directory`` has its ``run.zarr`` (or ``timeout_s``). The
+    store is made in a hidden directory and renamed into place, so a walk of the tree can
+    meet a directory that is gone a moment later: that walk just looks again."""
+    import time
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        try:
+            if any(directory.rglob("run.zarr")):
+                return
+        except FileNotFoundError:
+            pass
+        time.sleep(0.1)

@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from conftest import wait_for_store
+
 FAST = ["analyze=false", "progress=false"]
 
 
@@ -101,9 +103,7 @@ def test_sigkill_leaves_a_store_with_all_but_the_last_second(tmp_path):
     proc = subprocess.Popen([sys.executable, "-c", "from protocols.cli import main; main()",
                              "hardware.realtime=true", *FAST], cwd=tmp_path,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.time() + 60
-    while not list(tmp_path.rglob("run.zarr")) and time.time() < deadline:
-        time.sleep(0.1)
+    wait_for_store(tmp_path)
     time.sleep(6.0)                               # mid-protocol: the sweep runs from ~5 s to ~13 s
     killed_at = datetime.now().astimezone()
     proc.send_signal(signal.SIGKILL)
@@ -133,9 +133,7 @@ def _start_realtime_run(tmp_path):
     proc = subprocess.Popen([sys.executable, "-c", "from protocols.cli import main; main()",
                              "hardware.realtime=true", *FAST], cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 60
-    while not list(tmp_path.rglob("run.zarr")) and time.time() < deadline:
-        time.sleep(0.1)
+    wait_for_store(tmp_path)
     time.sleep(7.0)                               # in the sweep
     return proc
 

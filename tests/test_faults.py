@@ -14,7 +14,7 @@ import pytest
 import xarray as xr
 from hydra import compose, initialize_config_dir
 
-from conftest import tmpfs
+from conftest import tmpfs, wait_for_store
 
 from hardware.sim import make_sim_lab
 from protocols.engine import FAILED, RunEngine
@@ -32,9 +32,7 @@ CLI = [sys.executable, "-c", "from protocols.cli import main; main()", "analyze=
 def test_sigterm_stops_safely_like_ctrl_c(tmp_path):
     proc = subprocess.Popen([*CLI, "hardware.realtime=true"], cwd=tmp_path, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 60
-    while not list(tmp_path.rglob("run.zarr")) and time.time() < deadline:
-        time.sleep(0.1)
+    wait_for_store(tmp_path)
     time.sleep(7.0)
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=60)
