@@ -48,15 +48,18 @@ def _figure(w: float, h: float):
 
 
 def _bands(ax, a, finger, labels: bool = True):
-    seen = set()
+    """The finger's segments as full-height bands, one collection per label (one patch per
+    segment cost a sweep's figure more than its curves)."""
+    from matplotlib.collections import PolyCollection
+    t = a.run.time
+    spans: dict[str, list] = {}
     for sg in a.segments:
-        if sg.finger != finger or sg.label == "all":
-            continue
-        t0 = a.run.time[sg.start]
-        t1 = a.run.time[min(sg.stop, len(a.run.time) - 1)]
-        ax.axvspan(t0, t1, color=COLOURS.get(sg.label, "#eeeeee"), alpha=0.3, lw=0,
-                   label=None if sg.label in seen or not labels else sg.label)
-        seen.add(sg.label)
+        if sg.finger == finger and sg.label != "all":
+            t0, t1 = t[sg.start], t[min(sg.stop, len(t) - 1)]
+            spans.setdefault(sg.label, []).append([(t0, 0), (t0, 1), (t1, 1), (t1, 0)])
+    for label, boxes in spans.items():
+        ax.add_collection(PolyCollection(boxes, transform=ax.get_xaxis_transform(), facecolors=COLOURS.get(label, "#eeeeee"),
+                                         alpha=0.3, linewidths=0, label=label if labels else None), autolim=False)
 
 
 def _reactions(ax, a) -> None:
@@ -253,6 +256,16 @@ def _summary_line(segments, rows) -> str:
     return head + f"|flow| {min(mags):.2f}–{max(mags):.2f} mm/s (median {np.median(mags):.2f}), mean direction {angle:.0f}°"
 
 
+def _outline(mask: np.ndarray) -> np.ndarray:
+    """The boundary of a (H, W) bool mask as (N, 2, 2) segments (column, row) along pixel edges."""
+    m = np.pad(mask, 1)
+    r, c = np.nonzero(m[1:, 1:-1] != m[:-1, 1:-1])                  # edge above pixel (r, c)
+    horizontal = np.stack([np.c_[c - 0.5, r - 0.5], np.c_[c + 0.5, r - 0.5]], axis=1)
+    r, c = np.nonzero(m[1:-1, 1:] != m[1:-1, :-1])                  # edge left of pixel (r, c)
+    vertical = np.stack([np.c_[c - 0.5, r - 0.5], np.c_[c - 0.5, r + 0.5]], axis=1)
+    return np.concatenate([horizontal, vertical])
+
+
 def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
     """One figure for every segment called ``label``: a row per finger (its middle segment)."""
     by_finger: dict[str, list] = {}
@@ -279,37 +292,46 @@ def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
                    for sg, *_ in picked for (v, kind), agg in (rows.get(sg.id) or {}).get("flows", {}).items()
                    if kind == "dynamic"] + [1e-6])
     scale = biggest / (0.25 * min(h_px, w_px))               # px/frame per drawn px
-    # fixed layout in inches: a heading per view (its axes), then per row a title, the frame and
-    # the summary line
+    # Fixed layout in inches: a heading per view (its axes), then per row a title, the frame and
+    # the summary line. Every panel is drawn on one axes spanning the figure, in frame pixels
+    # (one axes per panel made matplotlib's own overhead most of the figure's cost).
     top_in, row_in, img_in, col_in = 1.05, 2.55, 1.85, 3.6
     W, H = col_in * len(views), top_in + row_in * n + 0.1
+    px_in = min((col_in - 0.75) / w_px, img_in / h_px)              # inches per frame pixel
     fig = _figure(W, H)
-    axes = np.array([[fig.add_axes([(0.55 + col_in * j) / W, (H - top_in - row_in * r - 0.3 - img_in) / H,
-                                    (col_in - 0.75) / W, img_in / H]) for j in range(len(views))]
-                     for r in range(n)])
+    ax = fig.add_axes([0, 0, 1, 1])
+    ax.set_axis_off()
+    ax.set_xlim(-0.5, W / px_in - 0.5)
+    ax.set_ylim(H / px_in - 0.5, -0.5)                               # rows down, as in an image
+
+    def corner(r: int, j: int) -> tuple[int, int]:
+        """(column, row) in the figure's pixel grid of panel (row r, view j)'s pixel (0, 0)."""
+        return round((0.55 + col_in * j) / px_in), round((top_in + row_in * r + 0.3) / px_in)
+
     for j, v in enumerate(views):
         plan = model.plans[v]
         fig.text((0.55 + col_in * j) / W, (H - top_in + 0.12) / H,
                  f"{v} view: → sensor {_axis(plan.cols)} ({plan.shape[1] * plan.mm_per_px:.0f} mm wide), "
                  f"↓ sensor {_axis(plan.rows)}", fontsize=8, va="bottom")
+    canvas = np.full((round(H / px_in) + 1, round(W / px_in) + 1), 255, np.uint8)
+    outlines, borders, quiver = [], [], []
     noise = model.config.noise
     for r, ((sg, cf, s, e), mean) in enumerate(zip(picked, fields)):
         row = rows.get(sg.id) or {}
-        for ax, v in zip(axes[r], views):
-            plan = model.plans[v]
+        for j, v in enumerate(views):
             if v not in cf.views:
-                ax.set_axis_off()
                 continue
-            vr = cf.views[v]
-            ax.imshow(vr.frames[(s + e - 1) // 2], cmap="gray", vmin=0, vmax=255, origin="upper")
-            ax.contour(plan.mask, levels=[0.5], colors="C2", linewidths=0.8)
+            plan = model.plans[v]
+            c0, r0 = corner(r, j)
+            canvas[r0:r0 + h_px, c0:c0 + w_px] = cf.views[v].frames[(s + e - 1) // 2]
+            borders.append([(c0 - 0.5, r0 - 0.5), (c0 + w_px - 0.5, r0 - 0.5), (c0 + w_px - 0.5, r0 + h_px - 0.5),
+                            (c0 - 0.5, r0 + h_px - 0.5), (c0 - 0.5, r0 - 0.5)])
+            outlines.extend(_outline(plan.mask) + (c0, r0))
             m = mean.get(v)
             if m is not None:
-                step = 3
-                yy, xx = np.mgrid[0:m.shape[0]:step, 0:m.shape[1]:step]
-                keep = plan.mask[::step, ::step]
-                ax.quiver(xx[keep], yy[keep], m[::step, ::step, 0][keep], m[::step, ::step, 1][keep], color="C1",
-                          angles="xy", scale_units="xy", scale=scale, width=0.006)
+                yy, xx = np.mgrid[0:h_px:3, 0:w_px:3]
+                keep = plan.mask[::3, ::3]
+                quiver.append((xx[keep] + c0, yy[keep] + r0, m[::3, ::3, 0][keep], m[::3, ::3, 1][keep]))
             agg = row.get("flows", {}).get((v, "dynamic"))
             title = sg.finger
             if agg is not None:
@@ -317,18 +339,24 @@ def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
                 title += f": {agg['magnitude']:.2f} mm/s, conf {agg['confidence']:.2f}"
                 if px >= noise and agg["confidence"] > 0:
                     vec = np.array([np.cos(agg["direction"]), np.sin(agg["direction"])]) * px / scale
-                    c0, r0 = plan.shape[1] / 2, plan.shape[0] / 2
-                    ax.annotate("", xy=(c0 + vec[0], r0 + vec[1]), xytext=(c0, r0), gid=f"aggregate:{px!r}",
+                    mid = np.array([c0 + w_px / 2, r0 + h_px / 2])
+                    ax.annotate("", xy=tuple(mid + vec), xytext=tuple(mid), gid=f"aggregate:{px!r}", zorder=4,
                                 arrowprops=dict(color="cyan", width=2.0, headwidth=7, shrink=0.0))
                 else:
                     title += " (no arrow: below noise)"
-            ax.set_title(title, fontsize=8)
-            ax.set_xticks([])             # pixel indices tell nothing; the headings say the axes
-            ax.set_yticks([])
+            ax.text(c0 + w_px / 2 - 0.5, r0 - 0.5 - 0.08 / px_in, title, fontsize=8, ha="center", va="bottom")
         t0, t1 = a.run.time[sg.start], a.run.time[min(sg.stop, len(a.run.time) - 1)]
         fig.text(0.1 / W, (H - top_in - row_in * (r + 1) + 0.12) / H,
                  f"{sg.finger} segment {sg.id}, {t0:.2f}–{t1:.2f} s. " + _summary_line(by_finger[sg.finger], rows),
                  fontsize=7, va="bottom")
+    ax.imshow(canvas, cmap="gray", vmin=0, vmax=255, interpolation="nearest", aspect="auto",
+              extent=(-0.5, canvas.shape[1] - 0.5, canvas.shape[0] - 0.5, -0.5))
+    from matplotlib.collections import LineCollection
+    ax.add_collection(LineCollection(borders, colors="k", linewidths=0.8))
+    ax.add_collection(LineCollection(outlines, colors="C2", linewidths=0.8))
+    if quiver:
+        x, y, u, v = (np.concatenate(c) for c in zip(*quiver))
+        ax.quiver(x, y, u, v, color="C1", angles="xy", scale_units="xy", scale=scale, width=0.0016, zorder=3)
     mm_s = biggest * model.plans[views[0]].mm_per_px * rate
     fig.suptitle(f"'{label}' segments: the frame at a segment's middle (grey), the fingertip's outline in each view "
                  f"(green), the mean dynamic flow (orange) and the segment's\naggregated flow (cyan): the motion of "
