@@ -40,6 +40,9 @@ FLOW_PAIRS = 8
 """Frame pairs whose flow fields are averaged for a panel's quiver (spread over the segment)."""
 LEGEND = dict(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
 WIDE = dict(left=0.07, right=0.80)           # time-series figures: the legend in the right margin
+TITLE = dict(fontsize=10, y=1.0)
+"""A time-series panel's title: a fixed ``y`` spares matplotlib placing it above the tick labels
+(a layout pass per panel); there are none above a panel."""
 
 
 def _figure(w: float, h: float):
@@ -132,7 +135,7 @@ def electrodes(a):
             ax.plot(tr, raw[:, j], color=c, lw=0.5, alpha=0.35)
             ax.plot(ts, act[:, j], color=c, ls=ls, lw=1.5, label=f"taxel {tx + 1}")
         ax.set_ylabel("activation (kΩ)")
-        ax.set_title(f"{f}: raw (thin) vs Kalman+RTS smoothed (thick), the 5 most active taxels", fontsize=10)
+        ax.set_title(f"{f}: raw (thin) vs Kalman+RTS smoothed (thick), the 5 most active taxels", **TITLE)
         ax.legend(**LEGEND)
     axes[-1].set_xlabel("time since run start (s)")
     return fig
@@ -156,7 +159,7 @@ def pressure(a):
             ax.axhline(a.thresholds[f], color="C7", ls=":", lw=1, label="contact\nthreshold")
         _reactions(ax, a)
         ax.set_ylabel(unit)
-        ax.set_title(f"{f}: pressure and segments ({a.scheme} labels)", fontsize=10)
+        ax.set_title(f"{f}: pressure and segments ({a.scheme} labels)", **TITLE)
         ax.legend(**LEGEND)
     axes[-1].set_xlabel("time since run start (s)")
     return fig
@@ -179,7 +182,7 @@ def taxels(a):
     cax = fig.add_axes([box.x1 + 0.01, box.y0, 0.012, box.height])
     fig.colorbar(im, cax=cax, label="activation (kΩ)")
     ax.set_ylabel("taxel (1..24)")
-    ax.set_title(f"{f}: smoothed taxel activations (impedance above rest); segments along the top", fontsize=10)
+    ax.set_title(f"{f}: smoothed taxel activations (impedance above rest); segments along the top", **TITLE)
     _bands(ax2, a, f)
     ax2.plot(*_interleave(t, env.edges, env.act_min[:, k], env.act_max[:, k]), lw=0.6)
     ax2.set_xlim(t[0], t[-1])
