@@ -4,7 +4,8 @@
 
 - ``analysis``: CPU of ``analyze_run`` (one worker, figures on) of the 60 s five-finger store
   of ``bench_analysis.py`` against the bare dynamic Farnebäck calls on the same frames, each
-  repetition paired (ratio = analysis CPU / bare flow CPU); the figures' CPU alone.
+  repetition paired (ratio = analysis CPU / bare flow CPU); the figures' CPU alone, and the
+  ratio without them.
 - ``workers``: wall time of the same analysis (figures off) with 1, 2, … the cores available.
 - ``startup``: ``tactile-run --help`` and ``tactile-analyze --help`` (wall and CPU of the child).
 - ``dryrun``: the default dry run ``tactile-run progress=false`` (wall and CPU of the child).
@@ -91,6 +92,8 @@ def bench_analysis(store: Path, work: Path, repeat: int) -> None:
     emit(stats("bare_dynamic_farneback_cpu_s", bare))
     emit(stats("analysis_over_bare_dynamic_ratio", ratio, paired=True, target=1.3))
     emit(stats("figures_cpu_s", figs))
+    emit(stats("analysis_without_figures_over_bare_dynamic_ratio", [(f - g) / b for f, g, b in zip(full, figs, bare)],
+               paired=True))
 
 
 def bench_workers(store: Path, work: Path, repeat: int) -> None:
