@@ -78,17 +78,24 @@ class FlowEstimator:
         elif config.method == "tvl1":
             self._algo = cv2.optflow.DualTVL1OpticalFlow_create(**config.tvl1)
 
-    def __call__(self, prev: np.ndarray, nxt: np.ndarray) -> np.ndarray:
-        """Flow (H, W, 2) float32 in pixels that carries ``prev`` (H, W uint8) onto ``nxt``."""
+    def __call__(self, prev: np.ndarray, nxt: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Flow (H, W, 2) float32 in pixels that carries ``prev`` (H, W uint8) onto ``nxt``;
+        written into ``out`` (a C-contiguous (H, W, 2) float32 array) if given."""
         c = self.config
         if self._algo is None:
             if not (prev.any() or nxt.any()):
                 # Farnebäck between two empty frames is exactly zero (tested); the stretches
                 # before and after a press are mostly empty frames
-                return np.zeros(prev.shape + (2,), np.float32)
-            return self._farneback(prev, nxt, None, c.pyr_scale, c.levels, c.winsize,
-                                                c.iterations, c.poly_n, c.poly_sigma, c.flags)
-        return self._algo.calc(prev, nxt, None)
+                if out is None:
+                    return np.zeros(prev.shape + (2,), np.float32)
+                out[...] = 0.0
+                return out
+            return self._farneback(prev, nxt, out, c.pyr_scale, c.levels, c.winsize,
+                                   c.iterations, c.poly_n, c.poly_sigma, c.flags)
+        if out is None:
+            return self._algo.calc(prev, nxt, None)
+        out[...] = self._algo.calc(prev, nxt, None)      # DIS and TV-L1 read ``out`` as an initial flow
+        return out
 
 
 def _check_frames(frames) -> np.ndarray:
@@ -114,7 +121,7 @@ def dynamic_flow(frames, *, config: FlowConfig = FlowConfig()) -> np.ndarray:
     estimate = FlowEstimator(config)
     out = np.zeros(frames.shape + (2,), np.float32)
     for t in range(1, len(frames)):
-        out[t] = estimate(frames[t - 1], frames[t])
+        estimate(frames[t - 1], frames[t], out[t])
     return out
 
 
@@ -135,7 +142,10 @@ def static_flow(frames, reference, *, config: FlowConfig = FlowConfig()) -> np.n
             raise ValueError(f"reference: expected an index or a {frames.shape[1:]} uint8 frame, "
                              f"got shape {ref.shape} dtype {ref.dtype}")
     estimate = FlowEstimator(config)
-    return np.stack([estimate(ref, f) for f in frames])
+    out = np.empty(frames.shape + (2,), np.float32)
+    for f, field in zip(frames, out):
+        estimate(ref, f, field)
+    return out
 
 
 def contact_reference(total_activation, threshold: float, settle: int = 10) -> int:
