@@ -6,14 +6,13 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cliapp.quick_help import help_text, wants_help
+from cliapp.quick_help import help_text, print_and_exit, wants_help
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 
 
 def main() -> None:
     if wants_help(sys.argv[1:]):
-        print(help_text(CONF_DIR, "analyze"))
-        sys.exit(0)
+        print_and_exit(help_text(CONF_DIR, "analyze"))
     from .cli import main as analyze
     analyze()

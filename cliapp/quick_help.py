@@ -4,6 +4,8 @@ with ``$APP_CONFIG_GROUPS`` filled from the config directory's groups, as Hydra 
 
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
 from string import Template
 
@@ -27,3 +29,13 @@ def help_text(conf_dir: Path, config_name: str) -> str:
 
 def wants_help(argv: list[str]) -> bool:
     return "--help" in argv or "-h" in argv
+
+
+def print_and_exit(text: str) -> None:
+    """Print ``text`` and exit 0. A reader that stops early (``tactile-run --help | head``) is
+    not an error: no traceback, as for any command-line tool."""
+    try:
+        print(text, flush=True)
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # the exit's flush goes nowhere
+    sys.exit(0)

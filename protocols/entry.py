@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cliapp.quick_help import help_text, wants_help
+from cliapp.quick_help import help_text, print_and_exit, wants_help
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 
@@ -14,11 +14,9 @@ CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 def main() -> None:
     argv = sys.argv[1:]
     if wants_help(argv):
-        print(help_text(CONF_DIR, "config"))
-        sys.exit(0)
+        print_and_exit(help_text(CONF_DIR, "config"))
     if argv in (["--list"], ["list"]):                 # what there is to run, one line each
         from .listing import listing
-        print(listing(CONF_DIR))
-        sys.exit(0)
+        print_and_exit(listing(CONF_DIR))
     from .cli import main as run
     run()

@@ -213,3 +213,13 @@ def test_a_simulated_sweep_runs_on_the_joblib_launcher(tmp_path):
     [summary] = tmp_path.glob("multirun/*/*/summary.csv")
     rows = summary.read_text().splitlines()[1:]
     assert len(rows) == 2 and all(",success," in r for r in rows), rows
+
+
+@pytest.mark.parametrize("entry", ["protocols.entry", "analysis.entry"])
+def test_help_into_a_closed_pipe_is_no_error(entry):
+    """``tactile-run --help | head -1``: the reader goes away first; no traceback, exit 0."""
+    proc = subprocess.Popen([sys.executable, "-c", f"from {entry} import main; main()", "--help"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()                                   # before the child has written anything
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 0 and err == "", err
