@@ -58,6 +58,7 @@ class RunData:
         config: the run's resolved config (from provenance) or {}.
         missing: groups that were absent, with what that costs.
         input_sha256: checksum of the stored arrays the analysis reads and of the frames kept.
+        tree: the store opened as an ``xarray.DataTree`` (lazy; e.g. for :func:`open_truth`).
     """
 
     path: Path
@@ -77,6 +78,7 @@ class RunData:
     valid: np.ndarray | None = None
     baseline_counts: np.ndarray | None = None
     baseline_uncertainty: np.ndarray | None = None
+    tree: object = field(default=None, repr=False)
 
     @property
     def dropped_invalid(self) -> int:
@@ -262,7 +264,7 @@ def load_run(path, in_memory_frames: int = IN_MEMORY_FRAMES) -> RunData:
     return RunData(path=path, time=time, fingers=fingers, electrodes=electrodes, pdc=pdc, arm_time=arm_time,
                    tcp_pose=tcp_pose, tcp_speed=tcp_speed, events=events, attrs=attrs, config=config,
                    missing=missing, input_sha256=h.hexdigest(), dropped=dropped, valid=valid,
-                   baseline_counts=baseline_counts, baseline_uncertainty=baseline_unc)
+                   baseline_counts=baseline_counts, baseline_uncertainty=baseline_unc, tree=dt)
 
 
 def _values(ds, name: str, path: Path, dtype=float) -> np.ndarray:
@@ -280,9 +282,10 @@ def _unreadable(path: Path, name: str, exc: Exception) -> AnalysisInputError:
                               f"the store is damaged")
 
 
-def open_truth(path):
-    """The ``truth`` group as {subgroup: {var: ndarray}} or ``None`` (for scoring only)."""
-    dt = open_run(path)
+def open_truth(run):
+    """The ``truth`` group as {subgroup: {var: ndarray}} or ``None`` (for scoring only).
+    ``run``: a :class:`RunData` (its opened store is reused) or a store's path."""
+    dt = run.tree if isinstance(run, RunData) and run.tree is not None else open_run(run)
     if "truth" not in dt.children:
         return None
     out = {}

@@ -142,7 +142,7 @@ def _analyse_and_write(store_path: Path, cfg, console) -> dict:
                   "contact_method": a.contact_method, "pressure_signal": a.prepared.pressure_name,
                   "preparation": a.prepared.preparation}
     score = None
-    truth = open_truth(store_path)
+    truth = open_truth(run)
     if truth is not None:
         score = scoring.score(a, truth)
         score["analysis_id"] = analysis_id
