@@ -404,14 +404,20 @@ def _render_activation_u8(activation, view_weights, base, step, scale, tris, nei
 
 
 @numba.njit(cache=True, nogil=True)
-def _render_frames(base, step, scale, tris, neighbours, boundary, orientation, fast, vertex_values, cache,
-                   to_u8, low, gain, out_f, out_u):
-    """Render (T, K) vertex values into ``out_f`` (T, H, W) float32, or into ``out_u`` as
-    8-bit frames (:func:`_store_u8`), one :func:`_render_frame` each; ``cache`` (H, W) holds
-    each pixel's triangle to start its walk from and is updated. Returns (frames z-buffered
-    in full, pixels z-tested one by one by the fast path)."""
+def _render_frames(base, step, scale, tris, neighbours, boundary, orientation, fast, activation, view_weights,
+                   vertex_values, cache, to_u8, low, gain, out_f, out_u):
+    """Render T frames into ``out_f`` (T, H, W) float32, or into ``out_u`` as 8-bit frames
+    (:func:`_store_u8`), one :func:`_render_frame` each; ``cache`` (H, W) holds each pixel's
+    triangle to start its walk from and is updated. The frames' vertex values: if
+    ``view_weights`` (C, K) has columns, :func:`_interpolate` of ``activation`` (T, C), one
+    frame at a time just before it is rendered (the values stay in cache; the arithmetic of
+    :func:`_render_activation_u8`), else ``vertex_values`` (T, K). Returns (frames
+    z-buffered in full, pixels z-tested one by one by the fast path)."""
     h, w = cache.shape
     k = base.shape[1]
+    interpolate = view_weights.shape[1] > 0
+    n_frames = activation.shape[0] if interpolate else vertex_values.shape[0]
+    row = np.empty((1, k))
     us, vs, ds, vals = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
     img, depth = np.zeros((h, w)), np.empty((h, w))
     winner, bary = np.empty((h, w), np.int32), np.empty((h, w, 3))
@@ -419,9 +425,14 @@ def _render_frames(base, step, scale, tris, neighbours, boundary, orientation, f
     cross_u, cross_d = np.empty((h, _MAX_CROSSINGS)), np.empty((h, _MAX_CROSSINGS), np.int64)
     n_cross = np.zeros(h, np.int64)
     stats = np.zeros(2, np.int64)             # frames z-buffered in full, pixels z-tested alone
-    for t in range(vertex_values.shape[0]):
+    for t in range(n_frames):
+        if interpolate:
+            _interpolate(activation[t:t + 1], view_weights, row)
+            values = row[0]
+        else:
+            values = vertex_values[t]
         n_slow = _render_frame(base, step, scale, tris, neighbours, boundary, orientation, fast,
-                               vertex_values[t], cache, us, vs, ds, vals, img, depth, winner, bary, slow,
+                               values, cache, us, vs, ds, vals, img, depth, winner, bary, slow,
                                slow_px, cross_u, cross_d, n_cross)
         if n_slow < 0:
             stats[0] += 1
