@@ -347,15 +347,26 @@ def _interpolate(activation, view_weights, out):
     Every row is computed on its own with the same arithmetic, so a frame's vertex values
     do not depend on the other frames computed with it (a BLAS product's blocking, and
     so its rounding, depends on the number of rows): a frame rendered alone, as
-    :mod:`tactile.online` does, is bit-identical to the same frame rendered in a chunk."""
+    :mod:`tactile.online` does, is bit-identical to the same frame rendered in a chunk.
+    Four taxels per pass over the row, (((row + a0·w0) + a1·w1) + a2·w2) + a3·w3: the
+    order of one taxel per pass, with a quarter of the row's loads and stores (≈ 30 %
+    faster)."""
     n_c, n_k = view_weights.shape
     for t in range(activation.shape[0]):
         row = out[t]
         row[:] = 0.0
-        for c in range(n_c):
-            a = activation[t, c]
+        c = 0
+        while c + 4 <= n_c:
+            a0, a1, a2, a3 = activation[t, c], activation[t, c + 1], activation[t, c + 2], activation[t, c + 3]
+            w0, w1, w2, w3 = view_weights[c], view_weights[c + 1], view_weights[c + 2], view_weights[c + 3]
             for k in range(n_k):
-                row[k] += a * view_weights[c, k]
+                row[k] = row[k] + a0 * w0[k] + a1 * w1[k] + a2 * w2[k] + a3 * w3[k]
+            c += 4
+        for c in range(c, n_c):
+            a = activation[t, c]
+            w = view_weights[c]
+            for k in range(n_k):
+                row[k] += a * w[k]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -404,14 +415,20 @@ def _render_activation_u8(activation, view_weights, base, step, scale, tris, nei
 
 
 @numba.njit(cache=True, nogil=True)
-def _render_frames(base, step, scale, tris, neighbours, boundary, orientation, fast, vertex_values, cache,
-                   to_u8, low, gain, out_f, out_u):
-    """Render (T, K) vertex values into ``out_f`` (T, H, W) float32, or into ``out_u`` as
-    8-bit frames (:func:`_store_u8`), one :func:`_render_frame` each; ``cache`` (H, W) holds
-    each pixel's triangle to start its walk from and is updated. Returns (frames z-buffered
-    in full, pixels z-tested one by one by the fast path)."""
+def _render_frames(base, step, scale, tris, neighbours, boundary, orientation, fast, activation, view_weights,
+                   vertex_values, cache, to_u8, low, gain, out_f, out_u):
+    """Render T frames into ``out_f`` (T, H, W) float32, or into ``out_u`` as 8-bit frames
+    (:func:`_store_u8`), one :func:`_render_frame` each; ``cache`` (H, W) holds each pixel's
+    triangle to start its walk from and is updated. The frames' vertex values: if
+    ``view_weights`` (C, K) has columns, :func:`_interpolate` of ``activation`` (T, C), one
+    frame at a time just before it is rendered (the values stay in cache; the arithmetic of
+    :func:`_render_activation_u8`), else ``vertex_values`` (T, K). Returns (frames
+    z-buffered in full, pixels z-tested one by one by the fast path)."""
     h, w = cache.shape
     k = base.shape[1]
+    interpolate = view_weights.shape[1] > 0
+    n_frames = activation.shape[0] if interpolate else vertex_values.shape[0]
+    row = np.empty((1, k))
     us, vs, ds, vals = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
     img, depth = np.zeros((h, w)), np.empty((h, w))
     winner, bary = np.empty((h, w), np.int32), np.empty((h, w, 3))
@@ -419,9 +436,14 @@ def _render_frames(base, step, scale, tris, neighbours, boundary, orientation, f
     cross_u, cross_d = np.empty((h, _MAX_CROSSINGS)), np.empty((h, _MAX_CROSSINGS), np.int64)
     n_cross = np.zeros(h, np.int64)
     stats = np.zeros(2, np.int64)             # frames z-buffered in full, pixels z-tested alone
-    for t in range(vertex_values.shape[0]):
+    for t in range(n_frames):
+        if interpolate:
+            _interpolate(activation[t:t + 1], view_weights, row)
+            values = row[0]
+        else:
+            values = vertex_values[t]
         n_slow = _render_frame(base, step, scale, tris, neighbours, boundary, orientation, fast,
-                               vertex_values[t], cache, us, vs, ds, vals, img, depth, winner, bary, slow,
+                               values, cache, us, vs, ds, vals, img, depth, winner, bary, slow,
                                slow_px, cross_u, cross_d, n_cross)
         if n_slow < 0:
             stats[0] += 1

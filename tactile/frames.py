@@ -262,16 +262,14 @@ def render(plan: FramePlan, mesh: SurfaceMesh, values, scale: float) -> np.ndarr
     return _render(plan, mesh, values[:, plan.vertices], scale)[0]
 
 
-_CHUNK = 128   # frames whose vertex values are computed at a time (≤ 1 MB: stays in cache)
-
-
 def render_activation(plan: FramePlan, mesh: SurfaceMesh, weights, activation, scale: float,
                       intensity_range: tuple[float, float] | None = None) -> np.ndarray:
     """Tactile frames of one view straight from taxel activation.
 
     The frames of ``render(plan, mesh, activation @ weights.T, scale)``, but only the view's
-    vertices are interpolated and, with ``intensity_range = (low, high)``, the renderer
-    writes the 8-bit frames of :func:`to_uint8` itself (no float frames in between).
+    vertices are interpolated, one frame at a time just before it is rendered, and, with
+    ``intensity_range = (low, high)``, the renderer writes the 8-bit frames of
+    :func:`to_uint8` itself (no float frames in between).
 
     Args:
         weights: (M, C) interpolation weights (C = 24 taxels).
@@ -283,36 +281,34 @@ def render_activation(plan: FramePlan, mesh: SurfaceMesh, weights, activation, s
     weights = np.asarray(weights, dtype=np.float64)
     activation = finite_array("activation", activation, ndim=2, last=weights.shape[1])
     view_weights = np.ascontiguousarray(weights[plan.vertices].T)
-
-    def chunk(a, b):
-        out = np.empty((b - a, view_weights.shape[1]))
-        _k._interpolate(activation[a:b], view_weights, out)
-        return out
-
-    return _render(plan, mesh, chunk, scale, intensity_range, n_frames=len(activation))[0]
+    return _render(plan, mesh, None, scale, intensity_range, activation=activation,
+                   view_weights=view_weights)[0]
 
 
-def _render(plan, mesh, vertex_values, scale, intensity_range=None, fast=True, n_frames=None):
-    """Render the values of the plan's vertices: a (T, K) array, or a function (start, stop)
-    → that chunk of it for ``n_frames`` frames, called for _CHUNK frames at a time. Returns
-    (frames, number of frames z-buffered in full, number of pixels z-tested one by one);
+def _render(plan, mesh, vertex_values, scale, intensity_range=None, fast=True, activation=None,
+            view_weights=None):
+    """Render (T, K) values of the plan's vertices, or if ``view_weights`` (C, K) is given the
+    vertex values interpolated from (T, C) ``activation`` frame by frame. Returns (frames,
+    number of frames z-buffered in full, number of pixels z-tested one by one);
     ``fast=False`` z-buffers every frame (the reference renderer)."""
-    if n_frames is None:
-        values, n_frames = vertex_values, len(vertex_values)
-        vertex_values = lambda a, b: values[a:b]                             # noqa: E731
     h, w = plan.shape
+    k = len(plan.vertices)
+    if view_weights is None:
+        vertex_values = np.ascontiguousarray(vertex_values, dtype=np.float64)
+        activation, view_weights = np.zeros((0, 0)), np.zeros((0, 0))
+        n_frames = len(vertex_values)
+    else:
+        activation = np.ascontiguousarray(activation, dtype=np.float64)
+        vertex_values = np.zeros((0, k))
+        n_frames = len(activation)
     to_u8 = intensity_range is not None
     low, gain = _u8_mapping(*intensity_range) if to_u8 else (np.float32(0), np.float32(1))
     out = np.zeros((n_frames, h, w), np.uint8 if to_u8 else np.float32)
     none_f, none_u = np.zeros((0, h, w), np.float32), np.zeros((0, h, w), np.uint8)
-    geometry = frame_geometry(plan, mesh, scale, fast)
-    cache = frame_cache(plan)                    # each pixel's last triangle, across chunks
-    stats = np.zeros(2, np.int64)
-    for start in range(0, n_frames, _CHUNK):
-        stop = min(n_frames, start + _CHUNK)
-        chunk = np.ascontiguousarray(vertex_values(start, stop), dtype=np.float64)
-        stats += _k._render_frames(*geometry, chunk, cache, to_u8, low, gain,
-                                none_f if to_u8 else out[start:stop], out[start:stop] if to_u8 else none_u)
+    cache = frame_cache(plan)                    # each pixel's last triangle
+    stats = _k._render_frames(*frame_geometry(plan, mesh, scale, fast), activation, view_weights,
+                              vertex_values, cache, to_u8, low, gain, none_f if to_u8 else out,
+                              out if to_u8 else none_u)
     return out, int(stats[0]), int(stats[1])
 
 

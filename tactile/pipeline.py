@@ -134,7 +134,7 @@ class TactileModel:
             act = finite_array("activation", activation, ndim=2, last=24).astype(np.float32)
             out = (act @ self.operators[view].T).reshape((len(act),) + plan.shape)
             return out if intensity_range is None else frames.to_uint8(out, *intensity_range)
-        # Interpolates only the view's vertices (frames.render_activation), one chunk at a time.
+        # Interpolates only the view's vertices (frames.render_activation), each frame just before rendering it.
         return frames.render_activation(plan, self.mesh, self.weights, activation, self.config.scale,
                                         intensity_range)
 

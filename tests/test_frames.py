@@ -166,3 +166,21 @@ def test_render_activation_equals_interpolate_then_render(model, rng):
         assert u8.dtype == np.uint8 and np.abs(u8.astype(int) - frames.to_uint8(ref, 0.0, 8.0)).max() <= 1
     with pytest.raises(ValueError, match="activation"):
         frames.render_activation(model.plans["bottom"], model.mesh, model.weights, np.zeros((3, 23)), 0.25)
+
+
+@pytest.mark.parametrize("n_taxels", [24, 7])
+def test_vertex_values_are_the_taxel_order_sum_bit_for_bit(rng, n_taxels):
+    """The renderer's interpolation adds the taxels in order, one product at a time, for
+    every frame on its own: equal, bit for bit, to ((0 + a0·w0) + a1·w1) + … in NumPy,
+    whether a frame is interpolated alone (as the live pipeline does) or among others."""
+    weights = rng.random((n_taxels, 301))
+    activation = rng.normal(1.0, 2.0, (5, n_taxels))
+    expected = np.zeros((5, 301))
+    for c in range(n_taxels):
+        expected = expected + activation[:, c:c + 1] * weights[c]
+    together, alone = np.empty((5, 301)), np.empty((1, 301))
+    _frame_kernels._interpolate(activation, weights, together)
+    assert np.array_equal(together, expected)
+    for t in range(5):
+        _frame_kernels._interpolate(activation[t:t + 1], weights, alone)
+        assert np.array_equal(alone[0], expected[t])
