@@ -73,7 +73,7 @@ class Motion:
         dt = t - ts
         xt = x + v * dt + 0.5 * acc * dt * dt
         vt = v + acc * dt
-        R = rotvec_to_matrix(xt[3:]) @ self.R0 if np.any(xt[3:]) else self.R0
+        R = rotvec_to_matrix(xt[3:]) @ self.R0 if self.rotates and np.any(xt[3:]) else self.R0
         return self.p0 + xt[:3], R, vt
 
     def pose(self, t: float) -> np.ndarray:
