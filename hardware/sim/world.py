@@ -64,7 +64,9 @@ class SimWorld:
         self.dt = cfg.step_s
         self.tick = 0
         self.lock = threading.RLock()
-        self.advanced = threading.Condition(self.lock)
+        # notified after every frame; its own lock, so that threads waiting for simulated time
+        # (the recorder's pollers) wake without taking the world's lock from the stepping thread
+        self.advanced = threading.Condition()
         seeds = np.random.SeedSequence(cfg.seed).spawn(len(DEVICE_STREAMS))
         self.rngs = {name: np.random.default_rng(s) for name, s in zip(DEVICE_STREAMS, seeds)}
         self.frame_ticks = round(1.0 / (cfg.biotac_rate_hz * self.dt))
@@ -142,6 +144,7 @@ class SimWorld:
         """
         n_target = int(math.ceil(t_target / self.dt - 1e-9))     # never wake before t_target
         while True:
+            stopped = False
             with self.lock:
                 if self.tick >= n_target:
                     return True
@@ -150,9 +153,12 @@ class SimWorld:
                     self.tick += 1
                     self._step(self.tick)
                     if stop_when is not None and stop_when():
-                        self.advanced.notify_all()
-                        return False
+                        stopped = True
+                        break
+            with self.advanced:
                 self.advanced.notify_all()
+            if stopped:
+                return False
             if pace is not None:
                 pace(self.time)
 
