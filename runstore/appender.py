@@ -25,7 +25,7 @@ import os
 import re
 import threading
 import uuid
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -108,7 +108,9 @@ class GrowingArray:
     def discard(self, p: Pending, rows: int) -> None:
         """Remove the chunk files of append ``p`` wholly past ``rows`` (a failed append's: no
         ``zarr.json`` refers to them)."""
-        first = p.files and int(p.files[0][0].split(self._sep)[1])
+        if not p.files:
+            return
+        first = int(p.files[0][0].split(self._sep)[1])           # chunk index of its first file
         for i, (key, _) in enumerate(p.files):
             if (first + i) * self.chunk >= rows:
                 (self.directory / key).unlink(missing_ok=True)
@@ -219,7 +221,12 @@ def run_all(writes: list) -> None:
         if _pool is None:
             _pool = ThreadPoolExecutor(IO_THREADS, thread_name_prefix="runstore-io")
         futures = [_pool.submit(w) for w in writes]
-    error = next((e for e in [f.exception() for f in futures] if e is not None), None)
+    try:
+        errors = [f.exception() for f in futures]
+    except BaseException:                        # interrupted: no write may outlive the rollback
+        wait(futures)
+        raise
+    error = next((e for e in errors if e is not None), None)
     if error is not None:
         raise error
 
