@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -70,9 +71,14 @@ class BiotacFrame:
     pac: np.ndarray
 
     def is_valid(self) -> bool:
-        """False if any channel lies outside the 12-bit range 0..4095."""
-        return all(bool(np.all((a >= 0) & (a <= COUNTS_MAX)))
-                   for a in (self.electrodes, self.pdc, self.tdc, self.tac, self.pac))
+        """False if any channel lies outside the 12-bit range 0..4095 (checked once per frame:
+        the engine, the interlocks and the recorder all ask)."""
+        return self._valid
+
+    @cached_property
+    def _valid(self) -> bool:
+        return all(a.size == 0 or (a.min() >= 0 and a.max() <= COUNTS_MAX)
+                   for a in map(np.asarray, (self.electrodes, self.pdc, self.tdc, self.tac, self.pac)))
 
     @classmethod
     def describe(cls, fingers=FINGERS) -> tuple[Stream, ...]:

@@ -117,7 +117,7 @@ class Surface:
         inside = np.abs(w)[..., None] <= self._hl
         if self.kind == "straws":
             r = self._hw
-            h = r + np.sqrt(np.clip(r * r - du * du, 0.0, None))
+            h = r + np.sqrt(np.maximum(r * r - du * du, 0.0))
             h = np.where((np.abs(du) < r) & inside, h, 0.0)
         elif self.kind == "sticks":
             h = np.where((np.abs(du) <= self._hw) & inside, self._h, 0.0)
@@ -126,9 +126,9 @@ class Surface:
             R = (a * a + hc * hc) / (2 * hc)
             wc = w[..., None]
             rho2 = du * du + wc * wc
-            h = np.where(rho2 < a * a, np.sqrt(np.clip(R * R - rho2, 0, None)) - (R - hc), 0.0)
+            h = np.where(rho2 < a * a, np.sqrt(np.maximum(R * R - rho2, 0.0)) - (R - hc), 0.0)
         k = np.argmax(h, axis=-1)
-        top = np.take_along_axis(h, k[..., None], axis=-1)[..., 0]
+        top = h.max(axis=-1)                                          # h at k
         idx = np.where((top > 0) & on_board, k, -1)
         return base + np.where(on_board, top, 0.0), idx
 

@@ -27,6 +27,7 @@ import numpy as np
 from hardware.errors import DeviceError, ProtectiveStopError
 from runstore.status import RunStatus
 from tactile.slip import CAUSES
+from validation import build
 
 from .interlocks import InterlockTripped, Interlocks, SafetyConfig
 from .interrupts import Interrupts
@@ -68,7 +69,8 @@ class RunContext(Geometry):
         self.fingers = list(lab.biotac.fingers)
         self.finger_index = self.fingers.index(cfg.protocol.finger)
         self.tare_pdc = np.zeros(len(self.fingers))
-        safety = cfg.get("safety") or SafetyConfig()
+        # a plain dataclass, not the OmegaConf node: the interlocks read it every tick
+        safety = build(SafetyConfig, cfg.get("safety"), "safety")
         self.interlocks = Interlocks(safety, self.limits, self.fingers, lab.biotac.rate_hz, self.clock)
 
     @property

@@ -85,24 +85,27 @@ class Interlocks:
         self._last_seq, self._last_new_frame = frame.seq, now
         if not frame.is_valid():
             return                                   # corrupt frames are counted by the recorder
+        cfg = self.cfg
         pdc = frame.pdc.astype(float)
-        if np.any(pdc > self.cfg.pdc_max):
+        if pdc.max() > cfg.pdc_max:
             i = int(np.argmax(pdc))
             raise InterlockTripped("pdc_saturation", {"finger": self.fingers[i], "pdc": int(pdc[i]),
-                                                      "limit": self.cfg.pdc_max})
+                                                      "limit": cfg.pdc_max})
         low = frame.electrodes.min(axis=1)
-        if np.any(low < self.cfg.electrode_min):
+        if low.min() < cfg.electrode_min:
             i = int(np.argmin(low))
             raise InterlockTripped("electrode_saturation", {"finger": self.fingers[i], "counts": int(low[i]),
-                                                            "limit": self.cfg.electrode_min})
-        touching = pdc - self.tare_pdc > self.cfg.contact_threshold
-        self._contact_since = np.where(touching, np.where(np.isnan(self._contact_since), now,
-                                                          self._contact_since), np.nan)
-        held = now - np.nan_to_num(self._contact_since, nan=now)
-        if np.any(held > self.cfg.contact_time_max):
-            i = int(np.argmax(held))
+                                                            "limit": cfg.electrode_min})
+        # contact start times (s, clock), NaN while a finger does not touch
+        since = self._contact_since
+        touching = pdc - self.tare_pdc > cfg.contact_threshold
+        since[~touching] = np.nan
+        since[touching & np.isnan(since)] = now
+        held = now - since                            # s; NaN where not touching, never above the limit
+        if (held > cfg.contact_time_max).any():
+            i = int(np.nanargmax(held))
             raise InterlockTripped("contact_time", {"finger": self.fingers[i], "held_s": round(float(held[i]), 2),
-                                                    "limit_s": self.cfg.contact_time_max})
+                                                    "limit_s": cfg.contact_time_max})
 
     def _check_arm(self, arm) -> None:
         pose = np.asarray(arm.tcp_pose(), float)

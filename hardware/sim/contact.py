@@ -144,4 +144,4 @@ def pdc_rise(total_n, counts_per_n: float, saturation_n: float) -> np.ndarray:
 
 def quantise(x, lo: int = 0, hi: int = 4095) -> np.ndarray:
     """Round to integer counts and clip to the ADC range."""
-    return np.clip(np.rint(x), lo, hi)
+    return np.minimum(np.maximum(np.rint(x), lo), hi)

@@ -41,9 +41,28 @@ class Motion:
         self.rotates = bool(np.any(np.asarray(self.v0)[3:]) or
                             any(np.any(np.asarray(a)[3:]) for _, a in self.phases))
         self._rv0 = matrix_to_rotvec(self.R0)
+        self.moves_forever = bool(np.any(v != 0))       # an endless speedL: never at rest
+        self._last: tuple | None = None                 # (t, state) of the latest call of state()
+        self._at_rest: tuple | None = None              # the state after t_end when it ends at rest
 
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Position (3,) m, rotation matrix (3, 3), velocity (6,) at time ``t`` (s)."""
+        """Position (3,) m, rotation matrix (3, 3), velocity (6,) at time ``t`` (s).
+
+        The arrays are shared (do not modify them): the state at the latest time asked for is
+        kept (the world, the interlocks and the devices ask for the same instant), and so is
+        the constant state after a motion that ends at rest."""
+        if self._last is not None and self._last[0] == t:
+            return self._last[1]
+        if t >= self.t_end and self._at_rest is not None:
+            return self._at_rest
+        out = self._state(t)
+        if t >= self.t_end and not self.moves_forever:
+            self._at_rest = out
+        self._last = (t, out)
+        return out
+
+    def _state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`state` evaluated in closed form."""
         t = max(t, self.t0)
         if t >= self.t_end:
             (ts, x, v), acc = self._final, np.zeros(6)
@@ -54,7 +73,7 @@ class Motion:
         dt = t - ts
         xt = x + v * dt + 0.5 * acc * dt * dt
         vt = v + acc * dt
-        R = rotvec_to_matrix(xt[3:]) @ self.R0 if np.any(xt[3:]) else self.R0
+        R = rotvec_to_matrix(xt[3:]) @ self.R0 if self.rotates and np.any(xt[3:]) else self.R0
         return self.p0 + xt[:3], R, vt
 
     def pose(self, t: float) -> np.ndarray:
@@ -66,7 +85,7 @@ class Motion:
         return np.concatenate([p, matrix_to_rotvec(R) if self.rotates else self._rv0])
 
     def is_moving(self, t: float) -> bool:
-        return t < self.t_end or bool(np.any(self._final[2] != 0))
+        return t < self.t_end or self.moves_forever
 
 
 def hold(t0, p0, R0) -> Motion:

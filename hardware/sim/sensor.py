@@ -24,6 +24,9 @@ from .contact import (contact_noise_kohm, counts_from_impedance, impedance_from_
 
 TEMPLATE_OF_FINGER = {"ff": 0, "mf": 1, "th": 2, "rf": 0, "lf": 1}
 N_PAC = 22   # 2.2 kHz / 100 Hz
+_PAC_T = np.arange(N_PAC) / 2200.0                  # (22,) s, the PAC samples of a frame
+_RING_PHASE = 2 * np.pi * 250.0 * _PAC_T            # (22,) rad, a 250 Hz ring over them
+_RING_DECAY = np.exp(-_PAC_T / 0.006)               # (22,) its 6 ms decay
 
 
 @lru_cache(maxsize=4)
@@ -137,9 +140,8 @@ class BiotacModel:
         """22 PAC samples per finger: noise, a ringing burst on force changes (edges),
         broadband noise proportional to sliding friction."""
         c, rng = self.cfg, self.rng
-        n = np.arange(N_PAC) / 2200.0
         amp = c.pac_gain_per_n_s * np.abs(inp.force_rate)
-        ring = amp[:, None] * np.sin(2 * np.pi * 250.0 * n + self._pac_phase[:, None]) * np.exp(-n / 0.006)
+        ring = amp[:, None] * np.sin(_RING_PHASE + self._pac_phase[:, None]) * _RING_DECAY
         self._pac_phase = (self._pac_phase + 2 * np.pi * 250.0 * N_PAC / 2200.0) % (2 * np.pi)
         slip = c.pac_slip_gain * inp.friction[:, None] * rng.standard_normal((self.F, N_PAC))
         noise = self.pac_std[:, None] * rng.standard_normal((self.F, N_PAC))

@@ -81,7 +81,7 @@ class GroundTruth:
                 if rec and math.isnan(rec[-1][2]):
                     rec[-1][2] = tc
         # sweeps
-        speed = float(np.linalg.norm(v_world))
+        speed = float(np.linalg.norm(v_world)) if in_contact and sliding else 0.0
         sw = self._sweeps[finger]
         if in_contact and sliding and speed > 1e-3:
             d = v_world / speed

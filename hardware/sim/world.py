@@ -64,7 +64,9 @@ class SimWorld:
         self.dt = cfg.step_s
         self.tick = 0
         self.lock = threading.RLock()
-        self.advanced = threading.Condition(self.lock)
+        # notified after every frame; its own lock, so that threads waiting for simulated time
+        # (the recorder's pollers) wake without taking the world's lock from the stepping thread
+        self.advanced = threading.Condition()
         seeds = np.random.SeedSequence(cfg.seed).spawn(len(DEVICE_STREAMS))
         self.rngs = {name: np.random.default_rng(s) for name, s in zip(DEVICE_STREAMS, seeds)}
         self.frame_ticks = round(1.0 / (cfg.biotac_rate_hz * self.dt))
@@ -72,6 +74,8 @@ class SimWorld:
         self.fingers = tuple(cfg.fingers)
         c = cfg.contact
         self.tip = _fingertip(c.mesh_theta, c.mesh_phi, cfg.sensor.kernel_sigma_mm)
+        self._pole_m = self.tip.pole * 1e-3            # (3,) the pad's lowest point, sensor frame, m
+        self._reach_m = self.tip.axes.max() * 1e-3     # the ellipsoid's bounding sphere radius, m
         self.T_tcp_sensor = {f: pose_to_matrix(np.asarray(cfg.fingertips[f], float)) for f in self.fingers}
         # arm
         home = np.asarray(cfg.arm.home_pose, float)
@@ -140,6 +144,7 @@ class SimWorld:
         """
         n_target = int(math.ceil(t_target / self.dt - 1e-9))     # never wake before t_target
         while True:
+            stopped = False
             with self.lock:
                 if self.tick >= n_target:
                     return True
@@ -148,9 +153,12 @@ class SimWorld:
                     self.tick += 1
                     self._step(self.tick)
                     if stop_when is not None and stop_when():
-                        self.advanced.notify_all()
-                        return False
+                        stopped = True
+                        break
+            with self.advanced:
                 self.advanced.notify_all()
+            if stopped:
+                return False
             if pace is not None:
                 pace(self.time)
 
@@ -306,19 +314,22 @@ class SimWorld:
         pts = tip.points_m
         surf, stage = self.surface, self.stage
         lift = stage.lift if stage is not None else 0.0
-        pole_w = ps + Rs @ (tip.pole * 1e-3)
+        pole_w = ps + Rs @ self._pole_m
         on_object = stage.to_object if stage is not None else (lambda x, y: (x, y))
         pole_u = float(surf.to_board(*on_object(pole_w[0], pole_w[1]))[0]) if surf is not None else 0.0
         # bounding sphere of the ellipsoid first: most frames of most fingers touch nothing
         top = surf.max_z + lift if surf is not None else 0.0
-        far = surf is None or (ps[2] + Rs[2] @ tip.centre * 1e-3 - tip.axes.max() * 1e-3 >= top)
+        far = surf is None or (ps[2] + Rs[2] @ tip.centre * 1e-3 - self._reach_m >= top)
         z = None if far else ps[2] + pts @ Rs[2]
         if far or z.min() >= top:
             return self._no_contact(t, finger, pole_u, v_world, Rs)
         x = ps[0] + pts @ Rs[0]
         y = ps[1] + pts @ Rs[1]
-        h, idx = surf.height_and_feature(*on_object(x, y))
-        d_mm = np.maximum(h + lift - z, 0.0) * 1e3
+        # the height map only where the skin is below the tallest feature: nowhere else can it press
+        low = np.flatnonzero(z < top)
+        h, idx = surf.height_and_feature(*on_object(x[low], y[low]))
+        d_mm = np.zeros(len(z))                                    # (M,) indentation, mm
+        d_mm[low] = np.maximum(h + lift - z[low], 0.0) * 1e3
         pressed = d_mm > 0
         if not pressed.any():
             return self._no_contact(t, finger, pole_u, v_world, Rs)
@@ -346,7 +357,7 @@ class SimWorld:
             shear = shear + stage_shear
             f_world = f_world + traction
             friction += cc.friction * F if slid else 0.0
-        touching = set(np.unique(idx[pressed]).tolist()) - {-1}
+        touching = set(np.unique(idx[pressed[low]]).tolist()) - {-1}
         self.truth.update_finger(t, finger, F, touching, pole_u, v_world, Rs, speed > 1e-4)
         return FingerContact(load, F, friction, f_world, ps + Rs @ (centre * 1e-3), shear_load=shear)
 
