@@ -23,11 +23,8 @@ import itertools
 import json
 import os
 import re
-import threading
 import uuid
-from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 
 import numcodecs
@@ -105,16 +102,6 @@ class GrowingArray:
         self.set_rows(p.rows)
         self._tail = p.tail
 
-    def discard(self, p: Pending, rows: int) -> None:
-        """Remove the chunk files of append ``p`` wholly past ``rows`` (a failed append's: no
-        ``zarr.json`` refers to them)."""
-        if not p.files:
-            return
-        first = int(p.files[0][0].split(self._sep)[1])           # chunk index of its first file
-        for i, (key, _) in enumerate(p.files):
-            if (first + i) * self.chunk >= rows:
-                (self.directory / key).unlink(missing_ok=True)
-
     def set_rows(self, rows: int) -> None:
         """Rewrite the ``zarr.json`` with ``rows`` rows (chunks are left as they are)."""
         atomic_write(self.directory / "zarr.json", self._template.fill([rows]))
@@ -177,67 +164,23 @@ def _check(meta: dict, where: str) -> None:
         raise ValueError(f"{where}: codecs {codecs} not bytes (little-endian) or vlen-utf8, then zstd")
 
 
-IO_THREADS = 8          # arrays written at once: a commit is some 90 small files, each waiting on the disk
-
-
 def write_all(pending: list[Pending]) -> None:
-    """Write every pending append, several arrays at once (:data:`IO_THREADS`; each array's
-    chunks still before its ``zarr.json``): the files are small and each write waits on the
-    disk, not the CPU, so a commit's wall time drops several-fold.
-
-    On failure (a full disk), once every write has ended, every array's ``zarr.json`` is set
-    back to its rows before and the chunks wholly past them removed (best effort), and the
-    first error re-raised: the chunks left still hold every earlier row, since an append only
-    adds rows behind them."""
-    before = [(p, p.array.rows, p.array._tail) for p in pending]
+    """Write every pending append. On failure (a full disk) every array's ``zarr.json`` is set
+    back to its rows before (best effort) and the error re-raised: chunks written meanwhile
+    still hold every earlier row, since an append only adds rows behind them."""
+    before = [(p.array, p.array.rows, p.array._tail) for p in pending]
     try:
-        run_all([partial(p.array.write, p) for p in pending])
+        for p in pending:
+            p.array.write(p)
     except BaseException:
-        for p, rows, tail in before:
-            array = p.array
+        for array, rows, tail in before:
             array._tail = tail
             try:
-                array.discard(p, rows)           # first: it frees the room the zarr.json needs
                 if array.rows != rows:
                     array.set_rows(rows)
             except Exception:                    # noqa: BLE001 - the store refuses to commit instead
                 pass
         raise
-
-
-_pool: ThreadPoolExecutor | None = None
-_pool_lock = threading.Lock()
-
-
-def run_all(writes: list) -> None:
-    """Call every one of ``writes`` (callables writing files), :data:`IO_THREADS` at once; once
-    all have ended, raise the first error."""
-    if len(writes) < 2:
-        for w in writes:
-            w()
-        return
-    global _pool
-    with _pool_lock:
-        if _pool is None:
-            _pool = ThreadPoolExecutor(IO_THREADS, thread_name_prefix="runstore-io")
-        futures = [_pool.submit(w) for w in writes]
-    try:
-        errors = [f.exception() for f in futures]
-    except BaseException:                        # interrupted: no write may outlive the rollback
-        wait(futures)
-        raise
-    error = next((e for e in errors if e is not None), None)
-    if error is not None:
-        raise error
-
-
-def _forget_pool() -> None:
-    """In a forked child the pool's threads do not exist: start a new one there."""
-    global _pool, _pool_lock
-    _pool, _pool_lock = None, threading.Lock()
-
-
-os.register_at_fork(after_in_child=_forget_pool)
 
 
 def metadata_bytes(meta: dict) -> bytes:

@@ -28,7 +28,6 @@ import shutil
 import threading
 import uuid
 import warnings
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +35,7 @@ import zarr
 
 from hardware.biotac import FINGERS
 
-from .appender import GrowingArray, MetadataTemplate, atomic_write, run_all, write_all
+from .appender import GrowingArray, MetadataTemplate, atomic_write, write_all
 from .jsonvalues import jsonable, utc_now
 from .status import RunStatus
 from .layout import SCHEMA_VERSION, STATUSES, Block, dim_sizes, fixed_coords, lab_streams, run_schema
@@ -224,9 +223,7 @@ class RunStore:
             self._relist = True
             g = self._root.require_group(group)
             g.attrs.update(jsonable(attrs or {}))
-            writes: list = []
-            _write_tree(g, tree, group.rsplit("/", 1)[-1], writes)
-            run_all(writes)                   # the arrays at once: each is a few small files
+            _write_tree(g, tree, group.rsplit("/", 1)[-1])
 
     def write_variable(self, group: str, name: str, values, dims: tuple[str, ...], units: str, long_name: str,
                        **attrs) -> None:
@@ -355,9 +352,7 @@ def _guess_units(name: str, values: np.ndarray) -> str:
     return "1"
 
 
-def _write_tree(g: zarr.Group, tree: dict, label: str, writes: list) -> None:
-    """Create ``tree``'s subgroups under ``g`` and add to ``writes`` a call writing each of its
-    arrays (see :meth:`RunStore.write_tree`)."""
+def _write_tree(g: zarr.Group, tree: dict, label: str) -> None:
     arrays = {k: np.asarray(v) for k, v in tree.items() if not isinstance(v, dict)}
     lengths = {a.shape[0] for a in arrays.values() if a.ndim >= 1}
     shared = len(lengths) == 1 and sum(a.ndim >= 1 for a in arrays.values()) > 1
@@ -368,16 +363,12 @@ def _write_tree(g: zarr.Group, tree: dict, label: str, writes: list) -> None:
         else:
             dtype = a.dtype
         dims = [label if (k == 0 and shared) else f"{name}_dim{k}" for k in range(a.ndim)]
-        attrs = {"units": _guess_units(name, a), "long_name": f"{g.path.replace('/', ' ')} {name}".strip()}
-        writes.append(partial(_write_array, g, name, a, dtype, dims, attrs))
+        arr = g.create_array(name, shape=a.shape, chunks=tuple(max(1, s) for s in a.shape),
+                             dtype=dtype, dimension_names=dims or None,
+                             attributes={"units": _guess_units(name, a),
+                                         "long_name": f"{g.path.replace('/', ' ')} {name}".strip()})
+        if a.size:
+            arr[...] = a
     for name, sub in tree.items():
         if isinstance(sub, dict):
-            _write_tree(g.create_group(name), sub, name, writes)
-
-
-def _write_array(g: zarr.Group, name: str, a: np.ndarray, dtype, dims: list[str], attrs: dict) -> None:
-    """Create array ``name`` of ``g`` (one chunk) and write ``a`` into it."""
-    arr = g.create_array(name, shape=a.shape, chunks=tuple(max(1, s) for s in a.shape),
-                         dtype=dtype, dimension_names=dims or None, attributes=attrs)
-    if a.size:
-        arr[...] = a
+            _write_tree(g.create_group(name), sub, name)
