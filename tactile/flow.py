@@ -143,8 +143,8 @@ def static_flow(frames, reference, *, config: FlowConfig = FlowConfig()) -> np.n
                              f"got shape {ref.shape} dtype {ref.dtype}")
     estimate = FlowEstimator(config)
     out = np.empty(frames.shape + (2,), np.float32)
-    for f, field in zip(frames, out):
-        estimate(ref, f, field)
+    for frame, flow_field in zip(frames, out):
+        estimate(ref, frame, flow_field)
     return out
 
 
