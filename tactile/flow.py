@@ -82,19 +82,18 @@ class FlowEstimator:
         """Flow (H, W, 2) float32 in pixels that carries ``prev`` (H, W uint8) onto ``nxt``;
         written into ``out`` (a C-contiguous (H, W, 2) float32 array) if given."""
         c = self.config
-        if self._algo is None:
-            if not (prev.any() or nxt.any()):
-                # Farnebäck between two empty frames is exactly zero (tested); the stretches
-                # before and after a press are mostly empty frames
-                if out is None:
-                    return np.zeros(prev.shape + (2,), np.float32)
-                out[...] = 0.0
-                return out
+        if self._algo is not None:                       # a given flow would be their initial one
+            flow = self._algo.calc(prev, nxt, None)
+        elif prev.any() or nxt.any():
             return self._farneback(prev, nxt, out, c.pyr_scale, c.levels, c.winsize,
                                    c.iterations, c.poly_n, c.poly_sigma, c.flags)
+        else:
+            # Farnebäck between two empty frames is exactly zero (tested); the stretches
+            # before and after a press are mostly empty frames
+            flow = np.zeros(prev.shape + (2,), np.float32)
         if out is None:
-            return self._algo.calc(prev, nxt, None)
-        out[...] = self._algo.calc(prev, nxt, None)      # DIS and TV-L1 read ``out`` as an initial flow
+            return flow
+        out[...] = flow
         return out
 
 
