@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cliapp.heap import long_lived_frozen
 from runstore import rundir
 from runstore.provenance import git_state
 
@@ -128,6 +129,11 @@ def analyze_run(store_path, analysis_cfg=None, *, console=print) -> dict:
 def _analyse_and_write(store_path: Path, cfg, console) -> dict:
     run = load_run(store_path, in_memory_frames=cfg.memory.chunk_frames)
     model = get_model(cfg.tactile)
+    with long_lived_frozen():
+        return _analyse(store_path, run, model, cfg, console)
+
+
+def _analyse(store_path: Path, run, model, cfg, console) -> dict:
     a = analyse(run, cfg, model)
     run_dir = store_path.parent
     analysis_id = uuid.uuid4().hex

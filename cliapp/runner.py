@@ -7,6 +7,7 @@ SIGTERM into one line and exit status 3.
 
 from __future__ import annotations
 
+import gc
 import os
 import re
 import signal
@@ -47,6 +48,10 @@ def run_app(app, argv=None, step_fields=None) -> None:
     finally:
         for s in (signal.SIGINT, signal.SIGTERM):   # the app is done: a late signal must not turn
             signal.signal(s, signal.SIG_IGN)        # its exit status into a kill (at interpreter exit)
+        # Everything the app made is still referenced or about to be freed with the process:
+        # frozen, the collections at interpreter exit skip it (0.3-0.8 s of a dry run's exit
+        # otherwise). atexit handlers, and so logging's flush, still run.
+        gc.freeze()
 
 
 def report(exc: BaseException, what: str, verbose: bool = False) -> None:

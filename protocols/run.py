@@ -16,6 +16,7 @@ from pathlib import Path
 from omegaconf import OmegaConf
 from tqdm import tqdm
 
+from cliapp.heap import long_lived_frozen
 from hardware.errors import ConfigError
 from tactile.frames import DEFAULT_VIEWS
 from tactile.geometry import load_taxels
@@ -89,17 +90,18 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
             monitor, outcome = None, Outcome(FAILED, "the run engine could not start")
             screen = ProgressConsole() if cfg.progress else None
             try:
-                if not plan.setup:
-                    recorder.start()
-                if model:
-                    viewer = open_viewer(live.viewer, live_fingers(live, lab.biotac.fingers), model, run_dir, console)
-                    monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
-                                          display=screen.live_line() if screen else terminal_display(),
-                                          viewer=viewer)
-                outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=screen.bar if screen else None,
-                                    log=console,
-                                    live=monitor, interrupts=interrupts).run(
-                    start_recording=recorder.start if plan.setup else None)
+                with long_lived_frozen():      # shorter collector pauses while the readers run
+                    if not plan.setup:
+                        recorder.start()
+                    if model:
+                        viewer = open_viewer(live.viewer, live_fingers(live, lab.biotac.fingers), model, run_dir, console)
+                        monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
+                                              display=screen.live_line() if screen else terminal_display(),
+                                              viewer=viewer)
+                    outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=screen.bar if screen else None,
+                                        log=console,
+                                        live=monitor, interrupts=interrupts).run(
+                        start_recording=recorder.start if plan.setup else None)
             except Exception as exc:              # the engine never raises past its safe stop; this is the rest
                 outcome = Outcome(FAILED, f"{type(exc).__name__}: {exc}")
             finally:
