@@ -19,7 +19,7 @@ from hardware.arm import trapezoid_time
 from hardware.errors import brief
 from hardware.transforms import rotvec_to_matrix
 from hardware.surfaces import Surface, load_surface
-from tactile.geometry import fit_ellipsoid, load_taxels
+from tactile.geometry import cached_fit_ellipsoid, load_taxels
 
 from .steps import Criterion, ProtocolError, Repeat, Step, parse_steps
 
@@ -69,7 +69,7 @@ class Geometry:
         self.stage_cfg = hw.get("stage")          # the object stage's settings; None: the lab has none
         tip = np.asarray(hw.fingertips[finger], float)
         self.R_tip = rotvec_to_matrix(tip[3:])
-        fit = fit_ellipsoid(load_taxels())
+        fit = cached_fit_ellipsoid(load_taxels())
         pole_sensor = (fit.centre + np.array([0.0, 0.0, -fit.axes[2]])) * 1e-3
         self.pad_offset = self.R_tip @ pole_sensor + tip[:3]                     # TCP frame, m
 

@@ -44,7 +44,7 @@ and relaxation converges slowly). Speed: 24 x 4000 pairs in ~7 s on one core, af
 one-off numba compilation of ~10 s (cached on disk by numba). Memory: a few
 (65, 3) buffers, pairs are looped over.
 
-The results are cached on disk by :func:`tactile.geodesic_cache.cached_geodesic_distances`; change
+The results are cached on disk by :func:`tactile.disk_cache.cached_geodesic_distances`; change
 :data:`ALGORITHM_VERSION` whenever a change alters the numbers.
 """
 

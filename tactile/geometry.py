@@ -7,7 +7,7 @@ The pieces live in modules of one idea each:
   surface maps and closest points (:func:`fit_ellipsoid`, :class:`EllipsoidFit`, ...);
 - :mod:`tactile.geodesic`: geodesic distances on it, the method's (θ, φ) path and the accurate
   discrete geodesic (its numba kernels in ``tactile._geodesic_kernels``);
-- :mod:`tactile.geodesic_cache`: those distances kept on disk;
+- :mod:`tactile.disk_cache`: those distances and the fit, computed once and kept on disk;
 - :mod:`tactile.surface`: the kernel of the geodesic distance (:func:`kernel_weights`) and the
   interpolation over the surface mesh.
 
@@ -21,11 +21,11 @@ from __future__ import annotations
 from .ellipsoid import (SURFACE_TOL, EllipsoidFit, ellipsoid_angles, ellipsoid_normals, ellipsoid_points,
                         fit_ellipsoid, project_to_ellipsoid, taxel_angles)
 from .geodesic import ALGORITHM_VERSION, GEODESIC_METHODS, geodesic_distances, geodesic_path
-from .geodesic_cache import cached_geodesic_distances, default_cache_dir
+from .disk_cache import cached_fit_ellipsoid, cached_geodesic_distances, default_cache_dir
 from .surface import KERNEL_FORMS, kernel_weights
 from .taxels import load_taxels
 
 __all__ = ["ALGORITHM_VERSION", "GEODESIC_METHODS", "KERNEL_FORMS", "SURFACE_TOL", "EllipsoidFit",
-           "cached_geodesic_distances", "default_cache_dir", "ellipsoid_angles", "ellipsoid_normals",
+           "cached_fit_ellipsoid", "cached_geodesic_distances", "default_cache_dir", "ellipsoid_angles", "ellipsoid_normals",
            "ellipsoid_points", "fit_ellipsoid", "geodesic_distances", "geodesic_path", "kernel_weights",
            "load_taxels", "project_to_ellipsoid", "taxel_angles"]

@@ -96,7 +96,7 @@ class TactileModel:
         taxels = geometry.load_taxels() if taxels is None else finite_array("taxels", taxels, ndim=2, last=3)
         if len(taxels) != 24:
             raise ValueError(f"taxels: expected 24 taxel positions, got {len(taxels)}")
-        fit = geometry.fit_ellipsoid(taxels)
+        fit = geometry.cached_fit_ellipsoid(taxels, cache_dir=cache_dir)
         mesh = surface.build_mesh(fit.centre, fit.axes, spacing=config.mesh_spacing)
         weights = surface.interpolation_weights(mesh, taxels, sigma=config.sigma, kernel=config.kernel,
                                                 geodesic=config.geodesic, cache_dir=cache_dir)

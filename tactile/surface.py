@@ -21,7 +21,7 @@ import numpy as np
 
 from ._checks import finite_array, positive
 from .ellipsoid import ellipsoid_normals, ellipsoid_points, project_to_ellipsoid
-from .geodesic_cache import cached_geodesic_distances
+from .disk_cache import cached_geodesic_distances
 
 __all__ = ["KERNEL_FORMS", "SurfaceMesh", "build_mesh", "interpolate", "interpolation_weights",
            "kernel_weights", "tactile_surface"]

@@ -10,7 +10,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from tactile import geodesic_cache, geometry
+from tactile import disk_cache, geometry
 from tactile.geometry import (
     EllipsoidFit, cached_geodesic_distances, ellipsoid_angles, ellipsoid_normals,
     ellipsoid_points, fit_ellipsoid, geodesic_distances, geodesic_path, kernel_weights,
@@ -317,7 +317,7 @@ def test_cache_hit_skips_computation(tmp_path, pair_sets, monkeypatch):
     def fail(*args, **kwargs):
         raise AssertionError("recomputed despite a valid cache file")
 
-    monkeypatch.setattr(geodesic_cache, "geodesic_distances", fail)
+    monkeypatch.setattr(disk_cache, "geodesic_distances", fail)
     again = cached_geodesic_distances(AXES, pa, pb, cache_dir=tmp_path)
     np.testing.assert_array_equal(again, first)
     assert [p.suffix for p in tmp_path.iterdir()] == [".npz"]  # no temporary files left
@@ -373,6 +373,42 @@ def test_cache_key_depends_on_inputs(tmp_path, pair_sets):
     assert len(list(tmp_path.glob("*.npz"))) == 4
     paper = cached_geodesic_distances(AXES, pa, pb, method="paper", cache_dir=tmp_path)
     np.testing.assert_array_equal(paper, geodesic_distances(AXES, pa, pb, method="paper"))
+
+
+def test_geodesic_cache_key_is_the_one_files_were_written_under(pair_sets):
+    # a changed key would make every lab PC recompute its kernel distances once, silently
+    # (the digest is what the code before the ellipsoid fit's cache wrote)
+    pa, pb = pair_sets
+    assert disk_cache._cache_key(AXES, pa, pb, tags=(geometry.ALGORITHM_VERSION, "accurate", {})) == \
+        "68841bbb91d1696d6adadacc75fe4bfbe9ac0db5375e1c7c99bc02ea4ff554fb"
+
+
+def test_fit_cache_gives_the_fit_to_the_bit_and_skips_it_when_warm(tmp_path, monkeypatch):
+    taxels = load_taxels()
+    fresh = fit_ellipsoid(taxels)
+    for _ in range(2):        # written, then read back
+        cached = geometry.cached_fit_ellipsoid(taxels, cache_dir=tmp_path)
+        np.testing.assert_array_equal(cached.centre, fresh.centre)
+        np.testing.assert_array_equal(cached.axes, fresh.axes)
+        assert cached.rms == fresh.rms
+
+    def fail(*args, **kwargs):
+        raise AssertionError("fitted again despite a valid cache file")
+
+    monkeypatch.setattr(disk_cache, "fit_ellipsoid", fail)
+    np.testing.assert_array_equal(geometry.cached_fit_ellipsoid(taxels, cache_dir=tmp_path).axes, fresh.axes)
+    with pytest.raises(AssertionError, match="fitted again"):        # other points: another file
+        geometry.cached_fit_ellipsoid(taxels[:20], cache_dir=tmp_path)
+
+
+def test_damaged_fit_cache_is_reported_and_refitted(tmp_path):
+    taxels = load_taxels()
+    good = geometry.cached_fit_ellipsoid(taxels, cache_dir=tmp_path)
+    (path,) = tmp_path.glob("ellipsoid-*.npz")
+    path.write_bytes(b"not an npz file")
+    with pytest.warns(RuntimeWarning, match="ellipsoid cache file .* unusable"):
+        again = geometry.cached_fit_ellipsoid(taxels, cache_dir=tmp_path)
+    np.testing.assert_array_equal(again.axes, good.axes)
 
 
 def test_default_cache_dir(monkeypatch, tmp_path):

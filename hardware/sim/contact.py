@@ -53,7 +53,7 @@ class Fingertip:
 def build_fingertip(n_theta: int = 28, n_phi: int = 56, sigma_mm: float = 3.0) -> Fingertip:
     """Sample the contact half of the fitted BioTac ellipsoid on a (θ, φ) grid."""
     taxels = geometry.load_taxels()
-    fit = geometry.fit_ellipsoid(taxels)
+    fit = geometry.cached_fit_ellipsoid(taxels)
     a, b, c = fit.axes
     dth, dph = (np.pi / 2) / n_theta, 2 * np.pi / n_phi
     th = np.pi / 2 + (np.arange(n_theta) + 0.5) * dth

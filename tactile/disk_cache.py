@@ -1,4 +1,6 @@
-"""Geodesic distances computed once and kept on disk (atomic writes, checksummed reads)."""
+"""What is costly to compute and the same every time, computed once and kept on disk (atomic
+writes, checksummed reads): the geodesic distances of the interpolation kernel, and the
+ellipsoid fitted to the taxels (its optimiser, SciPy's, costs ~0.3 s of start-up to import)."""
 
 from __future__ import annotations
 
@@ -11,10 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .ellipsoid import _check_axes, _check_on_surface
+from ._checks import finite_array
+from .ellipsoid import EllipsoidFit, _check_axes, _check_on_surface, fit_ellipsoid
 from .geodesic import ALGORITHM_VERSION, GEODESIC_METHODS, geodesic_distances
 
-__all__ = ["cached_geodesic_distances", "default_cache_dir"]
+__all__ = ["cached_fit_ellipsoid", "cached_geodesic_distances", "default_cache_dir"]
+
+FIT_VERSION = "1"
+"""Part of the ellipsoid fit's cache key: change it when :func:`fit_ellipsoid` changes its result."""
 
 
 def default_cache_dir() -> Path:
@@ -26,12 +32,12 @@ def default_cache_dir() -> Path:
     return Path.home() / ".cache" / "tactile-flow"
 
 
-def _cache_key(ax: np.ndarray, pa: np.ndarray, pb: np.ndarray, method: str, kw: dict) -> str:
+def _cache_key(*arrays: np.ndarray, tags: tuple = ()) -> str:
+    """SHA-256 of ``tags`` (strings, JSON-able) and the arrays' shapes and bytes."""
     h = hashlib.sha256()
-    h.update(ALGORITHM_VERSION.encode())
-    h.update(method.encode())
-    h.update(json.dumps(kw, sort_keys=True, default=repr).encode())
-    for arr in (ax, pa, pb):
+    for tag in tags:
+        h.update(tag.encode() if isinstance(tag, str) else json.dumps(tag, sort_keys=True, default=repr).encode())
+    for arr in arrays:
         arr = np.ascontiguousarray(arr, dtype="<f8")
         h.update(repr(arr.shape).encode())
         h.update(arr.tobytes())
@@ -42,24 +48,25 @@ def _checksum(arr: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(arr, dtype="<f8").tobytes()).hexdigest()
 
 
-def _read_cache(path: Path, shape: tuple[int, int]) -> np.ndarray:
+def _read_cache(path: Path, shape: tuple) -> np.ndarray:
     # Open the file ourselves: np.load leaks its handle when the zip is unreadable.
+    # (The array is stored as "distances" for every kind: the files written before the fit's stay valid.)
     with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:
-        dist = np.array(data["distances"], dtype="<f8")
+        values = np.array(data["distances"], dtype="<f8")
         stored = str(data["checksum"])
-    if dist.shape != shape:
-        raise ValueError(f"shape {dist.shape}, expected {shape}")
-    if _checksum(dist) != stored:
+    if values.shape != shape:
+        raise ValueError(f"shape {values.shape}, expected {shape}")
+    if _checksum(values) != stored:
         raise ValueError("checksum mismatch")
-    return dist.astype(np.float64)
+    return values.astype(np.float64)
 
 
-def _write_cache(path: Path, dist: np.ndarray) -> None:
+def _write_cache(path: Path, values: np.ndarray) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, distances=dist, checksum=np.array(_checksum(dist)))
+            np.savez(fh, distances=values, checksum=np.array(_checksum(values)))
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
@@ -85,7 +92,7 @@ def cached_geodesic_distances(axes, points_a, points_b, *, method: str = "accura
     pa = _check_on_surface("points_a", ax, points_a)
     pb = _check_on_surface("points_b", ax, points_b)
     directory = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    path = directory / f"geodesic-{_cache_key(ax, pa, pb, method, kw)}.npz"
+    path = directory / f"geodesic-{_cache_key(ax, pa, pb, tags=(ALGORITHM_VERSION, method, kw))}.npz"
     shape = (len(pa), len(pb))
     if path.exists():
         try:
@@ -100,3 +107,27 @@ def cached_geodesic_distances(axes, points_a, points_b, *, method: str = "accura
         warnings.warn(f"could not write geodesic cache file {path} ({exc!r})",
                       RuntimeWarning, stacklevel=2)
     return dist
+
+
+def cached_fit_ellipsoid(points, *, cache_dir=None) -> EllipsoidFit:
+    """:func:`fit_ellipsoid` of ``points`` (N, 3) mm, computed once and kept on disk like the
+    geodesic distances: an .npz named by a SHA-256 of the points, :data:`FIT_VERSION` and
+    SciPy's version, holding centre, semi-axes and rms (mm). A damaged file is reported with
+    a warning and the fit recomputed; an unwritable cache costs only the time."""
+    from importlib.metadata import version
+    pts = finite_array("points", points, ndim=2, last=3)
+    directory = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    path = directory / f"ellipsoid-{_cache_key(pts, tags=(FIT_VERSION, version('scipy')))}.npz"
+    if path.exists():
+        try:
+            v = _read_cache(path, (7,))
+            return EllipsoidFit(centre=v[:3], axes=v[3:6], rms=float(v[6]))
+        except Exception as exc:  # any damage: report and refit
+            warnings.warn(f"ellipsoid cache file {path} is unusable ({exc!r}); fitting again",
+                          RuntimeWarning, stacklevel=2)
+    fit = fit_ellipsoid(pts)
+    try:
+        _write_cache(path, np.r_[fit.centre, fit.axes, fit.rms])
+    except OSError as exc:
+        warnings.warn(f"could not write ellipsoid cache file {path} ({exc!r})", RuntimeWarning, stacklevel=2)
+    return fit
