@@ -10,7 +10,8 @@ surface, so the finger's direction of motion is minus the tactile flow. Directio
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+from hardware.transforms import rotvec_to_matrix
 
 from . import segments as seg
 
@@ -30,7 +31,7 @@ def motion_direction_sensor(flow_sensor) -> np.ndarray:
 
 def sensor_to_world(tcp_rotvec, tip_rotvec) -> np.ndarray:
     """(3, 3) rotation sensor → world (robot base) = R(TCP in base) · R(sensor in TCP)."""
-    return Rotation.from_rotvec(tcp_rotvec).as_matrix() @ Rotation.from_rotvec(tip_rotvec).as_matrix()
+    return rotvec_to_matrix(tcp_rotvec) @ rotvec_to_matrix(tip_rotvec)
 
 
 def pose_at(arm_time, tcp_pose, t: float) -> np.ndarray:

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import find_peaks, savgol_filter
+from .signal1d import find_peaks, savgol_filter
 
 
 def savgol_frames(rate_hz: float, window_s: float) -> int:
@@ -25,7 +25,7 @@ def smooth(signal, rate_hz: float, window_s: float) -> np.ndarray:
     n = savgol_frames(rate_hz, window_s)
     if len(x) < n:
         return x.copy()
-    return savgol_filter(x, n, 2, axis=0)
+    return savgol_filter(x, n, 2)
 
 
 def contact_intervals(pressure, threshold: float, rate_hz: float, min_s: float = 0.1,
@@ -62,7 +62,8 @@ class Extrema:
 
 
 def extrema(signal, rate_hz: float, prominence: float, distance_s: float) -> Extrema:
-    """Peaks and troughs of ``signal − mean(signal)`` (``scipy.signal.find_peaks``).
+    """Peaks and troughs of ``signal − mean(signal)`` (:func:`analysis.signal1d.find_peaks`,
+    as ``scipy.signal.find_peaks``).
 
     ``prominence``: in the signal's units; ``distance_s``: minimum distance between two
     peaks (or two troughs), seconds.
@@ -70,8 +71,8 @@ def extrema(signal, rate_hz: float, prominence: float, distance_s: float) -> Ext
     x = np.asarray(signal, float)
     shifted = x - x.mean() if len(x) else x
     dist = max(1, int(round(distance_s * rate_hz)))
-    peaks, _ = find_peaks(shifted, prominence=prominence, distance=dist)
-    troughs, _ = find_peaks(-shifted, prominence=prominence, distance=dist)
+    peaks = find_peaks(shifted, prominence=prominence, distance=dist)
+    troughs = find_peaks(-shifted, prominence=prominence, distance=dist)
     return Extrema(peaks.astype(int), troughs.astype(int), float(prominence))
 
 

@@ -37,7 +37,8 @@ SLOW_TESTS = ("tests/test_geometry.py::test_accurate_geodesic_matches_principal_
               "tests/test_import_csv.py::test_recording_that_starts_in_contact_keeps_its_pressure_with_a_stored_calibration",
               "tests/test_viewer.py::test_bad_input_is_one_line_and_exit_2",
               "tests/test_viewer.py::test_the_core_packages_never_import_rerun",
-              "tests/test_architecture.py::test_importing_a_package_loads_nothing_above_it")
+              "tests/test_architecture.py::test_importing_a_package_loads_nothing_above_it",
+              "tests/test_architecture.py::test_a_run_and_its_analysis_load_neither_scipy_signal_nor_spatial")
 
 
 @pytest.hookimpl(tryfirst=True)              # before `-m` deselects

@@ -99,6 +99,27 @@ def test_importing_a_package_loads_nothing_above_it():
         assert loaded <= allowed, f"import {package} loads {sorted(loaded - allowed)}"
 
 
+#: SciPy packages the program does without: on import SciPy 1.17's ``scipy.signal`` parses its
+#: docstrings and loads ``scipy.stats`` (~0.7 s on one core), ``scipy.spatial`` ~0.25 s; the few
+#: functions used are in ``analysis.signal1d`` and ``hardware.transforms``
+SCIPY_AVOIDED = ("scipy.signal", "scipy.spatial")
+
+
+@pytest.mark.parametrize("package", sorted(ALLOWED))
+def test_no_module_imports_scipy_signal_or_spatial(package):
+    bad = [f"{path.relative_to(ROOT)}:{line} imports {t}" for module, path in modules(package)
+           for line, t in imports(module, path) if any(t == a or t.startswith(a + ".") for a in SCIPY_AVOIDED)]
+    assert not bad, "\n".join(bad)
+
+
+def test_a_run_and_its_analysis_load_neither_scipy_signal_nor_spatial():
+    code = ("import sys, protocols.cli, protocols.entry, protocols.run, analysis.run, analysis.entry\n"
+            "import analysis.figures, viewer.draw\n"
+            f"print(sorted(m for m in sys.modules if m.startswith({SCIPY_AVOIDED!r})))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", f"loaded: {out.strip()}"
+
+
 def _module_exists(name: str) -> bool:
     path = ROOT / name.replace(".", "/")
     return path.with_suffix(".py").exists() or (path / "__init__.py").exists()

@@ -1,7 +1,7 @@
 """What the viewer draws, as plain arrays: colours of frames and meshes, flow arrows, poses.
 
-Pure numpy (and matplotlib's colour map, scipy's rotations); shared by the replay
-(:mod:`viewer.record`) and the live viewer (:mod:`viewer.live`), so both draw the same way.
+Pure numpy (and matplotlib's colour map; poses' quaternions from :mod:`hardware.transforms`);
+shared by the replay (:mod:`viewer.record`) and the live viewer (:mod:`viewer.live`), so both draw the same way.
 Image coordinates are Rerun's: x = column, y = row, pixel (row i, col j) spans
 [j, j + 1) × [i, i + 1), so its centre is (j + 0.5, i + 0.5).
 """
@@ -12,6 +12,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from hardware.transforms import rotvec_to_quaternion  # noqa: F401  (poses as Rerun takes them: x, y, z, w)
 from tactile.frames import to_uint8
 
 FLOW_COLOUR = (80, 220, 255, 255)          # flow-field arrows: cyan, visible on the colour map
@@ -120,13 +121,6 @@ def footprint_centre(mask) -> np.ndarray:
     """(2,) image position (x, y) of the footprint's centroid: where the direction arrow starts."""
     rows, cols = np.nonzero(np.asarray(mask, bool))
     return np.array([cols.mean() + 0.5, rows.mean() + 0.5], np.float32)
-
-
-def rotvec_to_quaternion(rotvec) -> np.ndarray:
-    """(..., 3) rotation vectors (rad) → (..., 4) quaternions (x, y, z, w), as Rerun takes them."""
-    from scipy.spatial.transform import Rotation
-    rv = np.asarray(rotvec, np.float64)
-    return Rotation.from_rotvec(rv.reshape(-1, 3)).as_quat().reshape(rv.shape[:-1] + (4,))
 
 
 def hex_rgba(colour: str) -> int:
