@@ -7,6 +7,7 @@ SIGTERM into one line and exit status 3.
 
 from __future__ import annotations
 
+import atexit
 import gc
 import os
 import re
@@ -48,10 +49,11 @@ def run_app(app, argv=None, step_fields=None) -> None:
     finally:
         for s in (signal.SIGINT, signal.SIGTERM):   # the app is done: a late signal must not turn
             signal.signal(s, signal.SIG_IGN)        # its exit status into a kill (at interpreter exit)
-        # Everything the app made is still referenced or about to be freed with the process:
-        # frozen, the collections at interpreter exit skip it (0.3-0.8 s of a dry run's exit
-        # otherwise). atexit handlers, and so logging's flush, still run.
-        gc.freeze()
+        # At interpreter exit, after the other atexit handlers (logging's flush...), everything
+        # left is frozen: the collections of the exit then skip it (0.3-0.8 s of a dry run's
+        # exit otherwise). At exit only: a caller that goes on (a test) keeps its collector.
+        atexit.unregister(gc.freeze)
+        atexit.register(gc.freeze)
 
 
 def report(exc: BaseException, what: str, verbose: bool = False) -> None:

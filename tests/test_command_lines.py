@@ -223,3 +223,17 @@ def test_help_into_a_closed_pipe_is_no_error(entry):
     proc.stdout.close()                                   # before the child has written anything
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=60) == 0 and err == "", err
+
+
+def test_a_caller_that_goes_on_after_an_app_keeps_its_garbage_collector():
+    # The apps skip the collector's work at interpreter exit (everything is frozen then, from
+    # an atexit handler); a process that calls one and goes on must still collect its cycles.
+    code = ("import gc\n"
+            "from cliapp.runner import run_app\n"
+            "run_app(lambda: None, argv=[])\n"
+            "run_app(lambda: None, argv=[])\n"
+            "a = []; a.append(a); del a\n"
+            "print(gc.get_freeze_count(), gc.collect() > 0, gc.isenabled())\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["0", "True", "True"]
