@@ -20,6 +20,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from hardware.transforms import rotvec_to_quaternion
+
 pytest.importorskip("rerun")
 pytest.importorskip("datafusion")
 
@@ -381,6 +383,6 @@ def test_mesh_and_frame_colours_share_one_scale(model):
 
 
 def test_rotation_vectors_become_rerun_quaternions():
-    q = draw.rotvec_to_quaternion(np.array([[np.pi, 0, 0], [0, 0, 0]]))
+    q = rotvec_to_quaternion(np.array([[np.pi, 0, 0], [0, 0, 0]]))
     assert q[0] == pytest.approx([1, 0, 0, 0], abs=1e-12) and q[1] == pytest.approx([0, 0, 0, 1])
 

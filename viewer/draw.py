@@ -1,6 +1,6 @@
 """What the viewer draws, as plain arrays: colours of frames and meshes, flow arrows, poses.
 
-Pure numpy (and matplotlib's colour map; poses' quaternions from :mod:`hardware.transforms`);
+Pure numpy (and matplotlib's colour map);
 shared by the replay (:mod:`viewer.record`) and the live viewer (:mod:`viewer.live`), so both draw the same way.
 Image coordinates are Rerun's: x = column, y = row, pixel (row i, col j) spans
 [j, j + 1) × [i, i + 1), so its centre is (j + 0.5, i + 0.5).
@@ -12,7 +12,6 @@ from functools import lru_cache
 
 import numpy as np
 
-from hardware.transforms import rotvec_to_quaternion  # noqa: F401  (poses as Rerun takes them: x, y, z, w)
 from tactile.frames import to_uint8
 
 FLOW_COLOUR = (80, 220, 255, 255)          # flow-field arrows: cyan, visible on the colour map

@@ -25,6 +25,8 @@ import json
 import numpy as np
 import rerun as rr
 
+from hardware.transforms import rotvec_to_quaternion
+
 from . import TIMELINE, draw
 from .live import send_events, send_live
 from .scene import ARROW_SPACING, Scene, TactileTrack, tactile_tracks
@@ -122,7 +124,7 @@ def send_pose(rec, scene: Scene) -> None:
     pose = run.tcp_pose
     rec.log("world/tcp", rr.TransformAxes3D(0.02), static=True)
     rec.send_columns("world/tcp", times(run.arm_time),
-                     rr.Transform3D.columns(translation=pose[:, :3], quaternion=draw.rotvec_to_quaternion(pose[:, 3:])))
+                     rr.Transform3D.columns(translation=pose[:, :3], quaternion=rotvec_to_quaternion(pose[:, 3:])))
     rec.log("world/path", rr.LineStrips3D([pose[:, :3]], radii=0.0005, colors=[(200, 200, 200, 255)]), static=True)
     if run.tcp_speed is not None:
         rec.log("arm/speed", rr.SeriesLines(names="TCP speed (mm/s)"), static=True)
@@ -196,7 +198,7 @@ def send_fingertips(rec, scene: Scene) -> None:
     act = scene.prepared.activation[scene.shown]                 # (N, F, 24)
     for k, f in enumerate(scene.run.fingers):
         pose = scene.fingertips.get(f, np.r_[0.0, 0.05 * k, 0.0, 0.0, 0.0, 0.0])
-        rec.log(f"world/tcp/{f}", rr.Transform3D(translation=pose[:3], quaternion=draw.rotvec_to_quaternion(pose[3:]),
+        rec.log(f"world/tcp/{f}", rr.Transform3D(translation=pose[:3], quaternion=rotvec_to_quaternion(pose[3:]),
                                                  scale=1e-3), static=True)
         rec.log(f"world/tcp/{f}/mesh", rr.Mesh3D(vertex_positions=mesh.points, triangle_indices=mesh.triangles,
                                                  vertex_normals=mesh.normals), static=True)
