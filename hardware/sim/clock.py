@@ -46,9 +46,12 @@ class SimClock:
         if self.is_driver:
             return self.world.advance_to(t, stop_when=stop_when, pace=self._pace if self.realtime else None)
         w = self.world
-        with w.advanced:
-            w.advanced.wait_for(lambda: w.time >= t - 1e-12 or (stop_when is not None and stop_when()),
-                                timeout=self.max_wait_s)
+        if stop_when is None:
+            w.wait_until_tick(w.tick_at(t), self.max_wait_s)
+        else:                                      # look at stop_when after every frame
+            deadline = time.monotonic() + self.max_wait_s
+            while w.tick < w.tick_at(t) and not stop_when() and time.monotonic() < deadline:
+                w.wait_until_tick(None, deadline - time.monotonic())
         return w.time >= t - 1e-12
 
     def _pace(self, t: float) -> None:

@@ -11,6 +11,8 @@ registered with :meth:`add_sink` are called at their own periods to buffer sampl
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import math
 import threading
 from dataclasses import dataclass
@@ -64,9 +66,13 @@ class SimWorld:
         self.dt = cfg.step_s
         self.tick = 0
         self.lock = threading.RLock()
-        # notified after every frame; its own lock, so that threads waiting for simulated time
-        # (the recorder's pollers) wake without taking the world's lock from the stepping thread
-        self.advanced = threading.Condition()
+        # threads waiting for simulated time (the recorder's pollers): a heap of (tick, n, event)
+        # woken by the stepping thread once their tick is stepped, each alone, on a lock of
+        # their own (not the world's); waking them all at every frame cost two to three
+        # context switches per poller per frame
+        self._wakeups: list[tuple[int, int, threading.Event]] = []
+        self._wakeup_order = itertools.count()
+        self._wakeup_lock = threading.Lock()
         seeds = np.random.SeedSequence(cfg.seed).spawn(len(DEVICE_STREAMS))
         self.rngs = {name: np.random.default_rng(s) for name, s in zip(DEVICE_STREAMS, seeds)}
         self.frame_ticks = round(1.0 / (cfg.biotac_rate_hz * self.dt))
@@ -129,6 +135,10 @@ class SimWorld:
         """Simulated time (s)."""
         return self.tick * self.dt
 
+    def tick_at(self, t: float) -> int:
+        """The first tick at or after simulated time ``t`` (s)."""
+        return int(math.ceil(t / self.dt - 1e-9))     # never wake before t
+
     def add_sink(self, period_s: float, callback) -> None:
         """Call ``callback(t)`` every ``period_s`` (a whole number of steps) after stepping."""
         ticks = round(period_s / self.dt)
@@ -142,7 +152,7 @@ class SimWorld:
         The lock is released between frames so other threads can read buffers; ``pace(t)``
         (realtime mode) is called between frames, outside the lock.
         """
-        n_target = int(math.ceil(t_target / self.dt - 1e-9))     # never wake before t_target
+        n_target = self.tick_at(t_target)
         while True:
             stopped = False
             with self.lock:
@@ -155,12 +165,27 @@ class SimWorld:
                     if stop_when is not None and stop_when():
                         stopped = True
                         break
-            with self.advanced:
-                self.advanced.notify_all()
+            self._wake()
             if stopped:
                 return False
             if pace is not None:
                 pace(self.time)
+
+    def wait_until_tick(self, tick: int | None, timeout_s: float) -> None:
+        """Block a thread that does not step the world until ``tick`` has been stepped (``None``:
+        until the next frame has), or for ``timeout_s`` s of wall time at most."""
+        woken = threading.Event()
+        with self._wakeup_lock:
+            if tick is not None and self.tick >= tick:
+                return
+            heapq.heappush(self._wakeups, (-1 if tick is None else tick, next(self._wakeup_order), woken))
+        woken.wait(timeout_s)
+
+    def _wake(self) -> None:
+        """Wake the waiters whose tick has been stepped (and those waiting for any frame)."""
+        with self._wakeup_lock:
+            while self._wakeups and self._wakeups[0][0] <= self.tick:
+                heapq.heappop(self._wakeups)[2].set()
 
     def _step(self, tick: int) -> None:
         t = tick * self.dt
