@@ -12,10 +12,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy import ndimage
 from scipy import signal as sps
 from scipy.spatial.transform import Rotation
 
 from analysis import segments as seg
+from analysis.signal1d import _savgol_coefficients
+from tactile.aggregate import _eroded
 from analysis.signal1d import find_peaks, savgol_filter
 from hardware.transforms import matrix_to_rotvec, rotvec_to_matrix, rotvec_to_quaternion
 
@@ -97,6 +100,17 @@ def test_savgol_matches_scipy(window, extra, channels, scale, polyorder, seed):
     ref = sps.savgol_filter(x, window, polyorder, axis=0)
     assert ours.shape == x.shape
     np.testing.assert_allclose(ours, ref, rtol=1e-12, atol=1e-12 * np.abs(x).max())
+
+
+@settings(max_examples=200, deadline=None)
+@given(window=st.integers(2, 40).map(lambda h: 2 * h + 1), extra=st.integers(0, 100),
+       channels=st.sampled_from([(), (3,), (5, 3)]), polyorder=st.sampled_from([1, 2, 3, 4]),
+       seed=st.integers(0, 2**32 - 1))
+def test_savgol_interior_is_ndimage_convolve1d_to_the_bit(window, extra, channels, polyorder, seed):
+    x = np.cumsum(np.random.default_rng(seed).normal(size=(window + extra, *channels)), axis=0)
+    half = window // 2
+    ref = ndimage.convolve1d(x, _savgol_coefficients(window, polyorder), axis=0, mode="constant")
+    np.testing.assert_array_equal(savgol_filter(x, window, polyorder)[half:len(x) - half], ref[half:len(x) - half])
 
 
 def test_savgol_keeps_a_parabola_and_the_input():
@@ -183,3 +197,12 @@ def test_bad_rotations_are_refused():
         rotvec_to_matrix([1.0, 2.0])
     with pytest.raises(ValueError, match=r"\(\.\.\., 3, 3\)"):
         matrix_to_rotvec(np.eye(4))
+
+
+# ----------------------------------------------------------------------------- erosion
+
+@settings(max_examples=300, deadline=None)
+@given(h=st.integers(1, 30), w=st.integers(1, 30), fill=st.floats(0.0, 1.0), seed=st.integers(0, 2**32 - 1))
+def test_erosion_matches_scipy(h, w, fill, seed):
+    mask = np.random.default_rng(seed).random((h, w)) < fill
+    np.testing.assert_array_equal(_eroded(mask), ndimage.binary_erosion(mask, border_value=0))
