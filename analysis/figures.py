@@ -40,8 +40,7 @@ FLOW_PAIRS = 8
 """Frame pairs whose flow fields are averaged for a panel's quiver (spread over the segment)."""
 LEGEND = dict(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
 WIDE = dict(left=0.07, right=0.80)           # time-series figures: the legend in the right margin
-PNG = {"compress_level": 1}
-"""zlib level of the PNG files: 1 writes them in 60 % of the default level's (6) time, 8 % larger."""
+DPI = 90
 TITLE = dict(fontsize=10, y=1.0)
 """A time-series panel's title: a fixed ``y`` spares matplotlib placing it above the tick labels
 (a layout pass per panel); there are none above a panel."""
@@ -49,7 +48,11 @@ TITLE = dict(fontsize=10, y=1.0)
 
 def _figure(w: float, h: float):
     from matplotlib.figure import Figure
-    return Figure(figsize=(w, h))
+
+    from .agg_canvas import Canvas
+    fig = Figure(figsize=(w, h))
+    Canvas(fig)
+    return fig
 
 
 def _bands(ax, a, finger, labels: bool = True):
@@ -401,5 +404,5 @@ def make_all(a, model, out_dir: Path, cfg) -> tuple[list[str], list[str]]:
     out_dir.mkdir(parents=True, exist_ok=True)
     figures, left_out = build_all(a, model, cfg)
     for name, fig in figures:
-        fig.savefig(out_dir / name, dpi=90, pil_kwargs=PNG)
+        fig.canvas.save_png(out_dir / name, DPI)
     return [n for n, _ in figures], left_out
