@@ -40,6 +40,11 @@ def _line(fonts: tuple[str, ...], size: float, dpi: float, s: str, antialiased: 
     return (w / 64, h / 64, d / 64), image, font.get_bitmap_offset()[0] / 64
 
 
+def clear_text_cache() -> None:
+    """Forget every line kept by :func:`_line` (its bitmaps are a few hundred kB a run)."""
+    _line.cache_clear()
+
+
 class Renderer(RendererAgg):
     """:class:`RendererAgg` whose plain text comes from :func:`_line`."""
 

@@ -90,11 +90,47 @@ def _main_finger(a) -> tuple[str, int]:
 
 
 def _rows(n: int, height: float, top_in: float = 0.45, bottom_in: float = 0.55):
-    """A one-column figure of ``n`` panels ``height`` in tall with fixed margins in inches."""
+    """A one-column figure of ``n`` panels ``height`` in tall with fixed margins in inches, and
+    its ``n`` axes (time along x: see :func:`_time_axes`)."""
     fig = _figure(11, n * height + top_in + bottom_in)
     h = fig.get_figheight()
     fig.subplots_adjust(top=1 - top_in / h, bottom=bottom_in / h, hspace=0.35, **WIDE)
-    return fig
+    return fig, fig.subplots(n, 1, squeeze=False)[:, 0]
+
+
+def _in_view():
+    """An :class:`~matplotlib.ticker.AutoLocator` returning only the values inside the axis' view
+    (matplotlib builds a tick, ~1 ms of Python, for every value a locator returns)."""
+    from matplotlib.ticker import AutoLocator
+
+    class InView(AutoLocator):
+        def __call__(self):
+            lo, hi = sorted(self.axis.get_view_interval())
+            v, tol = np.asarray(super().__call__()), 1e-9 * (hi - lo)
+            return v[(v >= lo - tol) & (v <= hi + tol)]
+    return InView()
+
+
+def _time_axes(axes, t: np.ndarray) -> None:
+    """Panels stacked over one time axis ``t`` (s): the same x range; time tick labels under the
+    bottom one; the panels above get their tick marks as one collection each (matplotlib's
+    ticks cost ~1 ms apiece)."""
+    import matplotlib as mpl
+    from matplotlib.collections import LineCollection
+    from matplotlib.ticker import NullLocator
+    for ax in axes:
+        ax.set_xlim(min(t[0], 0.0), t[-1])
+        ax.yaxis.set_major_locator(_in_view())
+    bottom = axes[-1]
+    bottom.xaxis.set_major_locator(_in_view())
+    bottom.set_xlabel("time since run start (s)")
+    ticks = bottom.xaxis.get_major_locator()()
+    size, width = (mpl.rcParams[f"xtick.major.{k}"] for k in ("size", "width"))       # pt
+    for ax in axes[:-1]:
+        ax.xaxis.set_major_locator(NullLocator())
+        h_pt = ax.get_position().height * ax.get_figure().get_figheight() * 72
+        ax.add_collection(LineCollection([[(x, 0), (x, -size / h_pt)] for x in ticks], colors="k", linewidths=width,
+                                         transform=ax.get_xaxis_transform(), clip_on=False), autolim=False)
 
 
 FIGURE_BINS = 800
@@ -127,8 +163,7 @@ def _interleave(t: np.ndarray, edges: np.ndarray, low: np.ndarray, high: np.ndar
 
 def electrodes(a):
     fingers = list(a.contacts) or [a.run.fingers[0]]
-    fig = _rows(len(fingers), 2.8)
-    axes = fig.subplots(len(fingers), 1, squeeze=False, sharex=True)[:, 0]
+    fig, axes = _rows(len(fingers), 2.8)
     t, env = a.run.time, a.prepared.envelope
     for ax, f in zip(axes, fingers):
         k = a.run.fingers.index(f)
@@ -142,14 +177,13 @@ def electrodes(a):
         ax.set_ylabel("activation (kΩ)")
         ax.set_title(f"{f}: raw (thin) vs Kalman+RTS smoothed (thick), the 5 most active taxels", **TITLE)
         ax.legend(**LEGEND)
-    axes[-1].set_xlabel("time since run start (s)")
+    _time_axes(axes, t)
     return fig
 
 
 def pressure(a):
     fingers = list(a.contacts) or list(a.run.fingers)
-    fig = _rows(len(fingers), 2.6)
-    axes = fig.subplots(len(fingers), 1, squeeze=False, sharex=True)[:, 0]
+    fig, axes = _rows(len(fingers), 2.6)
     t = a.run.time
     unit = "PDC above rest" if a.prepared.pressure_name == "pdc" else "Σ activation (kΩ)"
     for ax, f in zip(axes, fingers):
@@ -165,9 +199,20 @@ def pressure(a):
         _reactions(ax, a)
         ax.set_ylabel(unit)
         ax.set_title(f"{f}: pressure and segments ({a.scheme} labels)", **TITLE)
-        ax.legend(**LEGEND)
-    axes[-1].set_xlabel("time since run start (s)")
+    _time_axes(axes, t)
+    _legend(fig, axes)
     return fig
+
+
+def _legend(fig, axes) -> None:
+    """One legend beside the top panel for every entry of ``axes`` (each label once): the panels
+    share their colours and markers."""
+    entries: dict[str, object] = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            entries.setdefault(label, handle)
+    box = axes[0].get_position()
+    fig.legend(entries.values(), entries.keys(), **{**LEGEND, "bbox_to_anchor": (box.x1 + 0.01, box.y1)})
 
 
 def taxels(a):
@@ -401,8 +446,12 @@ def build_all(a, model, cfg):
 def make_all(a, model, out_dir: Path, cfg) -> tuple[list[str], list[str]]:
     """Write every figure into ``out_dir``. Returns the file names and the segment labels whose
     flow figure the cap ``max_segment_figures`` left out."""
+    from . import agg_canvas
     out_dir.mkdir(parents=True, exist_ok=True)
-    figures, left_out = build_all(a, model, cfg)
-    for name, fig in figures:
-        fig.canvas.save_png(out_dir / name, DPI)
+    try:
+        figures, left_out = build_all(a, model, cfg)
+        for name, fig in figures:
+            fig.canvas.save_png(out_dir / name, DPI)
+    finally:
+        agg_canvas.clear_text_cache()            # a run's figures share their labels, not the next run's
     return [n for n, _ in figures], left_out
