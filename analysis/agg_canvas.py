@@ -40,6 +40,20 @@ def _line(fonts: tuple[str, ...], size: float, dpi: float, s: str, antialiased: 
     return (w / 64, h / 64, d / 64), image, font.get_bitmap_offset()[0] / 64
 
 
+@lru_cache(maxsize=256)
+def _heights(fonts: tuple[str, ...], size: float, dpi: float) -> tuple:
+    """``(ascent, descent, line gap)`` in px of a font at ``size`` pt, from its OS/2 or hhea
+    table as matplotlib's text layout reads them (it reads the tables at every layout)."""
+    font = get_font(list(fonts))
+    for table, gap, ascent, descent in (("OS/2", "sTypoLineGap", "sTypoAscender", "sTypoDescender"),
+                                        ("hhea", "lineGap", "ascent", "descent")):
+        t = font.get_sfnt_table(table)
+        if t is not None:
+            scale = size * dpi / 72 / font.get_sfnt_table("head")["unitsPerEm"]
+            return t[ascent] * scale, -t[descent] * scale, t[gap] * scale
+    return None, None, None
+
+
 def clear_text_cache() -> None:
     """Forget every line kept by :func:`_line` (its bitmaps are a few hundred kB a run)."""
     _line.cache_clear()
@@ -50,6 +64,9 @@ class Renderer(RendererAgg):
 
     def _key(self, s: str, prop) -> tuple:
         return tuple(fontManager._find_fonts_by_props(prop)), prop.get_size_in_points(), self.dpi, s
+
+    def _get_font_height_metrics(self, prop):
+        return _heights(*self._key("", prop)[:3])
 
     def get_text_width_height_descent(self, s, prop, ismath):
         if ismath:

@@ -55,19 +55,19 @@ def _figure(w: float, h: float):
     return fig
 
 
-def _bands(ax, a, finger, labels: bool = True):
-    """The finger's segments as full-height bands, one collection per label (one patch per
-    segment cost a sweep's figure more than its curves)."""
+def _bands(ax, a, finger, labels: bool = True, y: tuple[float, float] = (0.0, 1.0), alpha: float = 0.3):
+    """The finger's segments as bands from ``y[0]`` to ``y[1]`` (fractions of the axes' height),
+    one collection per label (one patch per segment cost a sweep's figure more than its curves)."""
     from matplotlib.collections import PolyCollection
     t = a.run.time
     spans: dict[str, list] = {}
     for sg in a.segments:
         if sg.finger == finger and sg.label != "all":
             t0, t1 = t[sg.start], t[min(sg.stop, len(t) - 1)]
-            spans.setdefault(sg.label, []).append([(t0, 0), (t0, 1), (t1, 1), (t1, 0)])
+            spans.setdefault(sg.label, []).append([(t0, y[0]), (t0, y[1]), (t1, y[1]), (t1, y[0])])
     for label, boxes in spans.items():
         ax.add_collection(PolyCollection(boxes, transform=ax.get_xaxis_transform(), facecolors=COLOURS.get(label, "#eeeeee"),
-                                         alpha=0.3, linewidths=0, label=label if labels else None), autolim=False)
+                                         alpha=alpha, linewidths=0, label=label if labels else None), autolim=False)
 
 
 def _reactions(ax, a) -> None:
@@ -220,14 +220,11 @@ def taxels(a):
     t = a.run.time
     fig = _figure(11, 6.2)
     fig.subplots_adjust(top=0.93, bottom=0.09, hspace=0.12, **WIDE)
-    ax, ax2 = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    ax, ax2 = fig.subplots(2, 1, gridspec_kw={"height_ratios": [2, 1]})
     env = a.prepared.envelope                    # a long record: each stretch of frames by its highest value
     im = ax.imshow(env.act_max[:, k].T, aspect="auto", origin="lower", extent=(t[0], t[-1], 0.5, 24.5),
                    cmap="magma", interpolation="nearest")
-    for sg in a.segments:                       # the bands as a strip along the heatmap's top
-        if sg.finger == f and sg.label != "all":
-            t1 = t[min(sg.stop, len(t) - 1)]
-            ax.axvspan(t[sg.start], t1, ymin=0.97, ymax=1.0, color=COLOURS.get(sg.label, "#eeeeee"), lw=0)
+    _bands(ax, a, f, labels=False, y=(0.97, 1.0), alpha=1.0)      # the bands as a strip along the heatmap's top
     box = ax.get_position()
     cax = fig.add_axes([box.x1 + 0.01, box.y0, 0.012, box.height])
     fig.colorbar(im, cax=cax, label="activation (kΩ)")
@@ -235,9 +232,8 @@ def taxels(a):
     ax.set_title(f"{f}: smoothed taxel activations (impedance above rest); segments along the top", **TITLE)
     _bands(ax2, a, f)
     ax2.plot(*_interleave(t, env.edges, env.act_min[:, k], env.act_max[:, k]), lw=0.6)
-    ax2.set_xlim(t[0], t[-1])
     ax2.set_ylabel("activation (kΩ)")
-    ax2.set_xlabel("time since run start (s)")
+    _time_axes([ax, ax2], t)
     if ax2.get_legend_handles_labels()[0]:                  # no bands when nothing was segmented
         ax2.legend(**{**LEGEND, "bbox_to_anchor": (1.09, 1.0)}, title="segments")
     return fig
