@@ -3,10 +3,11 @@
 matplotlib 3.11's Agg renderer lays out and rasterises text glyph by glyph from Python (about
 0.1 ms a character; a flow figure's 1 600 characters were two thirds of its drawing). This
 canvas draws a line of plain text as matplotlib 3.10 did, FreeType rendering the whole line
-into one bitmap, and keeps that bitmap and the line's measured size for the process: the same
-label in the same font (tick labels, legend entries, units) is rasterised once for every
-figure. Text lands on whole pixels (as in matplotlib ≤ 3.10) instead of 1/64 px; mathtext and
-TeX are drawn by matplotlib as before.
+into one bitmap, and keeps that bitmap and the line's measured size until
+:func:`clear_text_cache` (``figures.make_all`` calls it after a run's figures): the same label
+in the same font (tick labels, legend entries, units) is rasterised once for all of them, and
+each font's line heights are read once, not at every layout. Text lands on whole pixels (as in
+matplotlib ≤ 3.10) instead of 1/64 px; mathtext and TeX are drawn by matplotlib as before.
 
 :meth:`Canvas.save_png` writes the drawn figure as an 8-bit RGB PNG (the figures are opaque: no
 alpha channel), rows unfiltered, zlib level 1: half of Pillow's time for matplotlib's RGBA

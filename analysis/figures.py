@@ -3,7 +3,7 @@
 - ``electrodes.png``: raw vs Kalman+RTS smoothed activation of the most active taxels;
 - ``pressure.png``: pressure per finger with its coloured segment bands (a sweep also marks the
   peaks of the features crossed), and markers where the live slip detector fired and the
-  protocol's reactions were issued;
+  protocol's reactions were issued (one legend for the panels, beside the top one);
 - ``taxels.png``: every taxel's smoothed activation (kΩ) over time with the segment bands above
   it, and the curves under the bands;
 - ``ellipsoid.png``: the interpolated activation on the fitted ellipsoid (a shaded surface) at
@@ -16,7 +16,9 @@
 
 Figures are built on :class:`matplotlib.figure.Figure` objects (no pyplot state) with fixed
 margins (no ``tight_layout``: it costs a draw per figure); legends sit beside the axes, never
-over the curves.
+over the curves. Stacked time panels share one time range, labelled under the bottom panel.
+They are drawn by :class:`.agg_canvas.Canvas` (each text line one cached bitmap, the PNG written
+directly): matplotlib's own text and PNG paths were half of the figures' cost.
 """
 
 from __future__ import annotations
