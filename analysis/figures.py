@@ -38,6 +38,10 @@ COLOURS = {"approach": "#c7c7c7", "before": "#4c72b0", "during": "#dd8452", "aft
 TAXEL_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
 TAXEL_STYLES = ("-", "--", "-.", ":", (0, (5, 1, 1, 1)))
 NO_FLOW_FIGURE = ("approach", "lift", "no_contact")
+FLOW_KEY = ("The frame at a segment's middle (grey), the fingertip's outline in each view (green), the mean dynamic "
+            "flow (orange) and the segment's\naggregated flow (cyan): the motion of the pressed pattern, which is "
+            "opposite to the finger's.")
+"""A flow figure's key under its title: the same lines in every flow figure (drawn once a run)."""
 FLOW_PAIRS = 8
 """Frame pairs whose flow fields are averaged for a panel's quiver (spread over the segment)."""
 LEGEND = dict(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
@@ -317,6 +321,15 @@ def _outline(mask: np.ndarray) -> np.ndarray:
     return np.concatenate([horizontal, vertical])
 
 
+def _segments_patch(segments: np.ndarray, **style):
+    """(N, 2, 2) line segments as one path (a patch): one Path object, not one per segment (an
+    outline has ~100 pixel edges a view)."""
+    from matplotlib.patches import PathPatch
+    from matplotlib.path import Path
+    codes = np.tile(np.array([Path.MOVETO, Path.LINETO], Path.code_type), len(segments))
+    return PathPatch(Path(segments.reshape(-1, 2), codes), fill=False, **style)
+
+
 def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
     """One figure for every segment called ``label``: a row per finger (its middle segment)."""
     by_finger: dict[str, list] = {}
@@ -404,15 +417,13 @@ def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
               extent=(-0.5, canvas.shape[1] - 0.5, canvas.shape[0] - 0.5, -0.5))
     from matplotlib.collections import LineCollection
     ax.add_collection(LineCollection(borders, colors="k", linewidths=0.8))
-    ax.add_collection(LineCollection(outlines, colors="C2", linewidths=0.8))
+    ax.add_artist(_segments_patch(np.asarray(outlines), edgecolor="C2", lw=0.8))   # add_patch walks its vertices
     if quiver:
         x, y, u, v = (np.concatenate(c) for c in zip(*quiver))
         ax.quiver(x, y, u, v, color="C1", angles="xy", scale_units="xy", scale=scale, width=0.0016, zorder=3)
     mm_s = biggest * model.plans[views[0]].mm_per_px * rate
-    fig.suptitle(f"'{label}' segments: the frame at a segment's middle (grey), the fingertip's outline in each view "
-                 f"(green), the mean dynamic flow (orange) and the segment's\naggregated flow (cyan): the motion of "
-                 f"the pressed pattern, which is opposite to the finger's. Arrows to scale: a quarter of a frame is "
-                 f"{mm_s:.2f} mm/s.", fontsize=8, y=1 - 0.1 / H, va="top")
+    fig.suptitle(f"'{label}' segments; arrows to scale: a quarter of a frame is {mm_s:.2f} mm/s.\n" + FLOW_KEY,
+                 fontsize=8, y=1 - 0.1 / H, va="top")
     fig.flow_scale = scale                    # px/frame per drawn px (tests check the arrows against it)
     return fig
 
