@@ -3,7 +3,7 @@
 - ``electrodes.png``: raw vs Kalman+RTS smoothed activation of the most active taxels;
 - ``pressure.png``: pressure per finger with its coloured segment bands (a sweep also marks the
   peaks of the features crossed), and markers where the live slip detector fired and the
-  protocol's reactions were issued;
+  protocol's reactions were issued (one legend for the panels, beside the top one);
 - ``taxels.png``: every taxel's smoothed activation (kΩ) over time with the segment bands above
   it, and the curves under the bands;
 - ``ellipsoid.png``: the interpolated activation on the fitted ellipsoid (a shaded surface) at
@@ -16,7 +16,9 @@
 
 Figures are built on :class:`matplotlib.figure.Figure` objects (no pyplot state) with fixed
 margins (no ``tight_layout``: it costs a draw per figure); legends sit beside the axes, never
-over the curves.
+over the curves. Stacked time panels share one time range, labelled under the bottom panel.
+They are drawn by :class:`.agg_canvas.Canvas` (each text line one cached bitmap, the PNG written
+directly): matplotlib's own text and PNG paths were half of the figures' cost.
 """
 
 from __future__ import annotations
@@ -36,12 +38,15 @@ COLOURS = {"approach": "#c7c7c7", "before": "#4c72b0", "during": "#dd8452", "aft
 TAXEL_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e")
 TAXEL_STYLES = ("-", "--", "-.", ":", (0, (5, 1, 1, 1)))
 NO_FLOW_FIGURE = ("approach", "lift", "no_contact")
+FLOW_KEY = ("The frame at a segment's middle (grey), the fingertip's outline in each view (green), the mean dynamic "
+            "flow (orange) and the segment's\naggregated flow (cyan): the motion of the pressed pattern, which is "
+            "opposite to the finger's.")
+"""A flow figure's key under its title: the same lines in every flow figure (drawn once a run)."""
 FLOW_PAIRS = 8
 """Frame pairs whose flow fields are averaged for a panel's quiver (spread over the segment)."""
 LEGEND = dict(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
 WIDE = dict(left=0.07, right=0.80)           # time-series figures: the legend in the right margin
-PNG = {"compress_level": 1}
-"""zlib level of the PNG files: 1 writes them in 60 % of the default level's (6) time, 8 % larger."""
+DPI = 90
 TITLE = dict(fontsize=10, y=1.0)
 """A time-series panel's title: a fixed ``y`` spares matplotlib placing it above the tick labels
 (a layout pass per panel); there are none above a panel."""
@@ -49,22 +54,26 @@ TITLE = dict(fontsize=10, y=1.0)
 
 def _figure(w: float, h: float):
     from matplotlib.figure import Figure
-    return Figure(figsize=(w, h))
+
+    from .agg_canvas import Canvas
+    fig = Figure(figsize=(w, h))
+    Canvas(fig)
+    return fig
 
 
-def _bands(ax, a, finger, labels: bool = True):
-    """The finger's segments as full-height bands, one collection per label (one patch per
-    segment cost a sweep's figure more than its curves)."""
+def _bands(ax, a, finger, labels: bool = True, y: tuple[float, float] = (0.0, 1.0), alpha: float = 0.3):
+    """The finger's segments as bands from ``y[0]`` to ``y[1]`` (fractions of the axes' height),
+    one collection per label (one patch per segment cost a sweep's figure more than its curves)."""
     from matplotlib.collections import PolyCollection
     t = a.run.time
     spans: dict[str, list] = {}
     for sg in a.segments:
         if sg.finger == finger and sg.label != "all":
             t0, t1 = t[sg.start], t[min(sg.stop, len(t) - 1)]
-            spans.setdefault(sg.label, []).append([(t0, 0), (t0, 1), (t1, 1), (t1, 0)])
+            spans.setdefault(sg.label, []).append([(t0, y[0]), (t0, y[1]), (t1, y[1]), (t1, y[0])])
     for label, boxes in spans.items():
         ax.add_collection(PolyCollection(boxes, transform=ax.get_xaxis_transform(), facecolors=COLOURS.get(label, "#eeeeee"),
-                                         alpha=0.3, linewidths=0, label=label if labels else None), autolim=False)
+                                         alpha=alpha, linewidths=0, label=label if labels else None), autolim=False)
 
 
 def _reactions(ax, a) -> None:
@@ -87,11 +96,47 @@ def _main_finger(a) -> tuple[str, int]:
 
 
 def _rows(n: int, height: float, top_in: float = 0.45, bottom_in: float = 0.55):
-    """A one-column figure of ``n`` panels ``height`` in tall with fixed margins in inches."""
+    """A one-column figure of ``n`` panels ``height`` in tall with fixed margins in inches, and
+    its ``n`` axes (time along x: see :func:`_time_axes`)."""
     fig = _figure(11, n * height + top_in + bottom_in)
     h = fig.get_figheight()
     fig.subplots_adjust(top=1 - top_in / h, bottom=bottom_in / h, hspace=0.35, **WIDE)
-    return fig
+    return fig, fig.subplots(n, 1, squeeze=False)[:, 0]
+
+
+def _in_view():
+    """An :class:`~matplotlib.ticker.AutoLocator` returning only the values inside the axis' view
+    (matplotlib builds a tick, ~1 ms of Python, for every value a locator returns)."""
+    from matplotlib.ticker import AutoLocator
+
+    class InView(AutoLocator):
+        def __call__(self):
+            lo, hi = sorted(self.axis.get_view_interval())
+            v, tol = np.asarray(super().__call__()), 1e-9 * (hi - lo)
+            return v[(v >= lo - tol) & (v <= hi + tol)]
+    return InView()
+
+
+def _time_axes(axes, t: np.ndarray) -> None:
+    """Panels stacked over one time axis ``t`` (s): the same x range; time tick labels under the
+    bottom one; the panels above get their tick marks as one collection each (matplotlib's
+    ticks cost ~1 ms apiece)."""
+    import matplotlib as mpl
+    from matplotlib.collections import LineCollection
+    from matplotlib.ticker import NullLocator
+    for ax in axes:
+        ax.set_xlim(min(t[0], 0.0), t[-1])
+        ax.yaxis.set_major_locator(_in_view())
+    bottom = axes[-1]
+    bottom.xaxis.set_major_locator(_in_view())
+    bottom.set_xlabel("time since run start (s)")
+    ticks = bottom.xaxis.get_major_locator()()
+    size, width = (mpl.rcParams[f"xtick.major.{k}"] for k in ("size", "width"))       # pt
+    for ax in axes[:-1]:
+        ax.xaxis.set_major_locator(NullLocator())
+        h_pt = ax.get_position().height * ax.get_figure().get_figheight() * 72
+        ax.add_collection(LineCollection([[(x, 0), (x, -size / h_pt)] for x in ticks], colors="k", linewidths=width,
+                                         transform=ax.get_xaxis_transform(), clip_on=False), autolim=False)
 
 
 FIGURE_BINS = 800
@@ -124,8 +169,7 @@ def _interleave(t: np.ndarray, edges: np.ndarray, low: np.ndarray, high: np.ndar
 
 def electrodes(a):
     fingers = list(a.contacts) or [a.run.fingers[0]]
-    fig = _rows(len(fingers), 2.8)
-    axes = fig.subplots(len(fingers), 1, squeeze=False, sharex=True)[:, 0]
+    fig, axes = _rows(len(fingers), 2.8)
     t, env = a.run.time, a.prepared.envelope
     for ax, f in zip(axes, fingers):
         k = a.run.fingers.index(f)
@@ -139,14 +183,13 @@ def electrodes(a):
         ax.set_ylabel("activation (kΩ)")
         ax.set_title(f"{f}: raw (thin) vs Kalman+RTS smoothed (thick), the 5 most active taxels", **TITLE)
         ax.legend(**LEGEND)
-    axes[-1].set_xlabel("time since run start (s)")
+    _time_axes(axes, t)
     return fig
 
 
 def pressure(a):
     fingers = list(a.contacts) or list(a.run.fingers)
-    fig = _rows(len(fingers), 2.6)
-    axes = fig.subplots(len(fingers), 1, squeeze=False, sharex=True)[:, 0]
+    fig, axes = _rows(len(fingers), 2.6)
     t = a.run.time
     unit = "PDC above rest" if a.prepared.pressure_name == "pdc" else "Σ activation (kΩ)"
     for ax, f in zip(axes, fingers):
@@ -162,9 +205,20 @@ def pressure(a):
         _reactions(ax, a)
         ax.set_ylabel(unit)
         ax.set_title(f"{f}: pressure and segments ({a.scheme} labels)", **TITLE)
-        ax.legend(**LEGEND)
-    axes[-1].set_xlabel("time since run start (s)")
+    _time_axes(axes, t)
+    _legend(fig, axes)
     return fig
+
+
+def _legend(fig, axes) -> None:
+    """One legend beside the top panel for every entry of ``axes`` (each label once): the panels
+    share their colours and markers."""
+    entries: dict[str, object] = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            entries.setdefault(label, handle)
+    box = axes[0].get_position()
+    fig.legend(entries.values(), entries.keys(), **{**LEGEND, "bbox_to_anchor": (box.x1 + 0.01, box.y1)})
 
 
 def taxels(a):
@@ -172,14 +226,11 @@ def taxels(a):
     t = a.run.time
     fig = _figure(11, 6.2)
     fig.subplots_adjust(top=0.93, bottom=0.09, hspace=0.12, **WIDE)
-    ax, ax2 = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    ax, ax2 = fig.subplots(2, 1, gridspec_kw={"height_ratios": [2, 1]})
     env = a.prepared.envelope                    # a long record: each stretch of frames by its highest value
     im = ax.imshow(env.act_max[:, k].T, aspect="auto", origin="lower", extent=(t[0], t[-1], 0.5, 24.5),
                    cmap="magma", interpolation="nearest")
-    for sg in a.segments:                       # the bands as a strip along the heatmap's top
-        if sg.finger == f and sg.label != "all":
-            t1 = t[min(sg.stop, len(t) - 1)]
-            ax.axvspan(t[sg.start], t1, ymin=0.97, ymax=1.0, color=COLOURS.get(sg.label, "#eeeeee"), lw=0)
+    _bands(ax, a, f, labels=False, y=(0.97, 1.0), alpha=1.0)      # the bands as a strip along the heatmap's top
     box = ax.get_position()
     cax = fig.add_axes([box.x1 + 0.01, box.y0, 0.012, box.height])
     fig.colorbar(im, cax=cax, label="activation (kΩ)")
@@ -187,9 +238,8 @@ def taxels(a):
     ax.set_title(f"{f}: smoothed taxel activations (impedance above rest); segments along the top", **TITLE)
     _bands(ax2, a, f)
     ax2.plot(*_interleave(t, env.edges, env.act_min[:, k], env.act_max[:, k]), lw=0.6)
-    ax2.set_xlim(t[0], t[-1])
     ax2.set_ylabel("activation (kΩ)")
-    ax2.set_xlabel("time since run start (s)")
+    _time_axes([ax, ax2], t)
     if ax2.get_legend_handles_labels()[0]:                  # no bands when nothing was segmented
         ax2.legend(**{**LEGEND, "bbox_to_anchor": (1.09, 1.0)}, title="segments")
     return fig
@@ -269,6 +319,15 @@ def _outline(mask: np.ndarray) -> np.ndarray:
     r, c = np.nonzero(m[1:-1, 1:] != m[1:-1, :-1])                  # edge left of pixel (r, c)
     vertical = np.stack([np.c_[c - 0.5, r - 0.5], np.c_[c - 0.5, r + 0.5]], axis=1)
     return np.concatenate([horizontal, vertical])
+
+
+def _segments_patch(segments: np.ndarray, **style):
+    """(N, 2, 2) line segments as one path (a patch): one Path object, not one per segment (an
+    outline has ~100 pixel edges a view)."""
+    from matplotlib.patches import PathPatch
+    from matplotlib.path import Path
+    codes = np.tile(np.array([Path.MOVETO, Path.LINETO], Path.code_type), len(segments))
+    return PathPatch(Path(segments.reshape(-1, 2), codes), fill=False, **style)
 
 
 def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
@@ -358,15 +417,13 @@ def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
               extent=(-0.5, canvas.shape[1] - 0.5, canvas.shape[0] - 0.5, -0.5))
     from matplotlib.collections import LineCollection
     ax.add_collection(LineCollection(borders, colors="k", linewidths=0.8))
-    ax.add_collection(LineCollection(outlines, colors="C2", linewidths=0.8))
+    ax.add_artist(_segments_patch(np.asarray(outlines), edgecolor="C2", lw=0.8))   # add_patch walks its vertices
     if quiver:
         x, y, u, v = (np.concatenate(c) for c in zip(*quiver))
         ax.quiver(x, y, u, v, color="C1", angles="xy", scale_units="xy", scale=scale, width=0.0016, zorder=3)
     mm_s = biggest * model.plans[views[0]].mm_per_px * rate
-    fig.suptitle(f"'{label}' segments: the frame at a segment's middle (grey), the fingertip's outline in each view "
-                 f"(green), the mean dynamic flow (orange) and the segment's\naggregated flow (cyan): the motion of "
-                 f"the pressed pattern, which is opposite to the finger's. Arrows to scale: a quarter of a frame is "
-                 f"{mm_s:.2f} mm/s.", fontsize=8, y=1 - 0.1 / H, va="top")
+    fig.suptitle(f"'{label}' segments; arrows to scale: a quarter of a frame is {mm_s:.2f} mm/s.\n" + FLOW_KEY,
+                 fontsize=8, y=1 - 0.1 / H, va="top")
     fig.flow_scale = scale                    # px/frame per drawn px (tests check the arrows against it)
     return fig
 
@@ -398,8 +455,12 @@ def build_all(a, model, cfg):
 def make_all(a, model, out_dir: Path, cfg) -> tuple[list[str], list[str]]:
     """Write every figure into ``out_dir``. Returns the file names and the segment labels whose
     flow figure the cap ``max_segment_figures`` left out."""
+    from . import agg_canvas
     out_dir.mkdir(parents=True, exist_ok=True)
-    figures, left_out = build_all(a, model, cfg)
-    for name, fig in figures:
-        fig.savefig(out_dir / name, dpi=90, pil_kwargs=PNG)
+    try:
+        figures, left_out = build_all(a, model, cfg)
+        for name, fig in figures:
+            fig.canvas.save_png(out_dir / name, DPI)
+    finally:
+        agg_canvas.clear_text_cache()            # a run's figures share their labels, not the next run's
     return [n for n, _ in figures], left_out
