@@ -23,6 +23,7 @@ directly): matplotlib's own text and PNG paths were half of the figures' cost.
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +32,8 @@ from tactile import flow as tflow
 from tactile import surface
 
 from . import flows as fl
+
+log = logging.getLogger(__name__)
 
 COLOURS = {"approach": "#c7c7c7", "before": "#4c72b0", "during": "#dd8452", "after": "#55a868", "lift": "#7f7f7f",
            "pour": "#4c72b0", "initial_slip": "#c44e52", "rotation": "#8172b3", "downward": "#dd8452",
@@ -452,6 +455,20 @@ def build_all(a, model, cfg):
     return out, left_out
 
 
+def _save(fig, path: Path) -> None:
+    """Write ``fig`` as a PNG through the fast canvas; if that fails (it uses matplotlib's private
+    text API, which a newer matplotlib may change), through matplotlib's own: slower, never lost.
+    A fault of the figure itself fails there again and is raised."""
+    try:
+        fig.canvas.save_png(path, DPI)
+    except Exception as e:                       # noqa: BLE001 - retried on the stock canvas below
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        log.warning("figures: the fast canvas failed (%s: %s); %s drawn by matplotlib's own",
+                    type(e).__name__, e, path.name)
+        FigureCanvasAgg(fig)
+        fig.savefig(path, dpi=DPI)
+
+
 def make_all(a, model, out_dir: Path, cfg) -> tuple[list[str], list[str]]:
     """Write every figure into ``out_dir``. Returns the file names and the segment labels whose
     flow figure the cap ``max_segment_figures`` left out."""
@@ -460,7 +477,7 @@ def make_all(a, model, out_dir: Path, cfg) -> tuple[list[str], list[str]]:
     try:
         figures, left_out = build_all(a, model, cfg)
         for name, fig in figures:
-            fig.canvas.save_png(out_dir / name, DPI)
+            _save(fig, out_dir / name)
     finally:
         agg_canvas.clear_text_cache()            # a run's figures share their labels, not the next run's
     return [n for n, _ in figures], left_out

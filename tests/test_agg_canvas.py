@@ -50,3 +50,20 @@ def test_figure_saved_as_drawn(tmp_path):
     with Image.open(tmp_path / "f.png") as im:
         assert im.size == (270, 180)
         assert np.array_equal(np.asarray(im), np.asarray(canvas.buffer_rgba())[..., :3])
+
+
+def test_a_figure_is_written_by_matplotlib_when_the_fast_canvas_fails(tmp_path, monkeypatch, caplog):
+    """The canvas uses matplotlib's private text API: a matplotlib that changes it costs speed,
+    not the figure."""
+    from analysis import figures
+
+    def broken(self, s, prop):
+        raise AttributeError("'FontManager' object has no attribute '_find_fonts_by_props'")
+    monkeypatch.setattr(agg_canvas.Renderer, "_key", broken)
+    fig = figures._figure(3, 2)
+    fig.add_subplot().set_xlabel("time since run start (s)")
+    figures._save(fig, tmp_path / "f.png")
+    with Image.open(tmp_path / "f.png") as im:
+        assert im.size == (270, 180)
+        assert (np.asarray(im.convert("L")) < 128).any()                   # the label's ink
+    assert "fast canvas failed" in caplog.text and "f.png" in caplog.text
