@@ -78,8 +78,8 @@ class Recorder:
             clock time, whichever comes first: about the most a crash loses).
         poll_interval_s: clock seconds between polls of a source. Only how often the device
             buffers are drained: a sample's time is its device's receipt time, and commits come
-            every ``flush_interval_s``. Each poll wakes a thread: polling every 10 ms instead
-            cost a simulated run five times the wake-ups and ~0.5 s of its ~5 s on one core.
+            every ``flush_interval_s``. Each poll wakes a thread (every 10 ms made five times the
+            wake-ups and context switches, which cost a simulated run on a few cores).
         retry_interval_s: clock seconds between retries of a failing source.
         min_latency_s: known minimum transport latency per stream (s) subtracted by the
             clock models (a float for every stream, or a dict); 0 keeps the receipt envelope.
