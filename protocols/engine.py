@@ -55,7 +55,7 @@ class Outcome:
 class RunContext(Geometry):
     """What a step's ``run`` sees: the lab, the recorder, parameters and helpers."""
 
-    def __init__(self, lab, recorder, cfg, progress=None, live=None):
+    def __init__(self, lab, recorder, cfg, progress=None, live=None, interrupts: Interrupts | None = None):
         super().__init__(cfg.hardware, lab.surface, cfg.protocol.finger)
         self.live = live                          # a protocols.live.LiveMonitor, or None
         self.hand_targets: dict[str, float] = {}  # joint angles commanded so far (rad)
@@ -65,6 +65,7 @@ class RunContext(Geometry):
         self.clock = lab.clock
         self.poll = 1.0 / lab.biotac.rate_hz
         self.stop_requested = False
+        self.interrupts = interrupts or Interrupts()
         self.progress = progress
         self.fingers = list(lab.biotac.fingers)
         self.finger_index = self.fingers.index(cfg.protocol.finger)
@@ -87,6 +88,7 @@ class RunContext(Geometry):
         :class:`~protocols.interlocks.InterlockTripped` when a safety limit is breached."""
         t0 = self.clock.now()
         self.clock.sleep(self.poll)
+        self.interrupts.raise_deferred()          # a second Ctrl-C that a finaliser dropped
         self.recorder.keep_up()                   # a simulated clock waits for the store to keep up
         if self.progress:
             self.progress(self.clock.now() - t0)
@@ -235,9 +237,9 @@ class RunEngine:
         self.lab, self.recorder, self.cfg, self.plan = lab, recorder, cfg, plan
         self.progress_factory = progress_factory
         self.log = log
-        self.ctx = RunContext(lab, recorder, cfg, live=live)
         self._own_interrupts = interrupts is None
         self.interrupts = interrupts or Interrupts(log)
+        self.ctx = RunContext(lab, recorder, cfg, live=live, interrupts=self.interrupts)
         self.done = 0                              # steps ended so far
 
     def run(self, start_recording=None) -> Outcome:
@@ -401,6 +403,7 @@ class RunEngine:
             if self.ctx.clock.now() > end:
                 raise DeviceError(f"arm: still moving {timeout_s:.1f} s after the stop command")
             self.ctx.clock.sleep(self.ctx.poll)
+            self.interrupts.raise_deferred()
 
     def _stop_pump(self) -> None:
         for _ in range(2):                        # a Ctrl-C may cut the command: once more

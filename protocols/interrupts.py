@@ -19,11 +19,18 @@ installed for the whole job and decides by the phase the run is in:
 
 SIGTERM counts as Ctrl-C. Handlers can only be installed on the main thread; elsewhere
 (tests driving a run from a thread) :meth:`Interrupts.installed` does nothing.
+
+A signal handler runs wherever the main thread is, and Python drops an exception raised in
+a finaliser (a weakref callback, ``__del__``) after printing "Exception ignored" and a
+traceback. So :meth:`Interrupts.install` also hooks :data:`sys.unraisablehook`: a dropped
+``KeyboardInterrupt`` is noted silently as :attr:`Interrupts.deferred`, and the engine
+raises it at its next tick (:meth:`Interrupts.raise_deferred`), one poll period late.
 """
 
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 from contextlib import contextmanager
 
@@ -47,12 +54,18 @@ class Interrupts:
         self.phase = "setup"
         self._on_stop = None                # the engine's safe-stop request, in the motion phase
         self.motion_signals = 0
+        self.deferred = False               # a raised KeyboardInterrupt that a finaliser dropped
+        self._unraisable_before = None
 
     def install(self) -> dict:
-        """Handle SIGINT and SIGTERM with :meth:`handle` from now on (main thread only: else
-        nothing); returns the previous handlers."""
+        """Handle SIGINT and SIGTERM with :meth:`handle` from now on, and catch the
+        interrupts a finaliser drops (main thread only: else nothing); returns the previous
+        handlers."""
         if threading.current_thread() is not threading.main_thread():
             return {}
+        if sys.unraisablehook != self._unraisable:
+            self._unraisable_before = sys.unraisablehook
+            sys.unraisablehook = self._unraisable
         return {s: signal.signal(s, self.handle) for s in SIGNALS}
 
     @contextmanager
@@ -64,6 +77,20 @@ class Interrupts:
         finally:
             for s, handler in old.items():
                 signal.signal(s, handler)
+            if old and sys.unraisablehook == self._unraisable:
+                sys.unraisablehook = self._unraisable_before
+
+    def raise_deferred(self) -> None:
+        """Raise the ``KeyboardInterrupt`` a finaliser dropped, if any (once)."""
+        if self.deferred:
+            self.deferred = False
+            raise KeyboardInterrupt
+
+    def _unraisable(self, unraisable) -> None:
+        if issubclass(unraisable.exc_type, KeyboardInterrupt):
+            self.deferred = True            # raised by a signal handler: raise it again later
+            return
+        (self._unraisable_before or sys.__unraisablehook__)(unraisable)
 
     @contextmanager
     def during(self, phase: str, on_stop=None):
