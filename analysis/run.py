@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from cliapp.heap import long_lived_frozen
-from runstore import rundir
+from runstore import inflight, rundir
 from runstore.provenance import git_state
 
 from . import figures as figs
@@ -181,6 +181,7 @@ def _analyse(store_path: Path, run, model, cfg, console) -> dict:
         previous = _previous_record(run_dir)
         results.swap_in(staging, run_dir, previous)
     except BaseException:
+        inflight.settle()                        # an interrupt may have left zarr writing into it
         shutil.rmtree(staging, ignore_errors=True)
         raise
     _report(console, run_dir, summary, score)

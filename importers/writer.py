@@ -41,7 +41,7 @@ import zarr
 from hardware.biotac import COUNTS_MAX, PAC_RATE_HZ
 from hardware.device import batch_times
 from hardware.streams import as_dtype
-from runstore import RunStatus, RunStore, rundir
+from runstore import RunStatus, RunStore, inflight, rundir
 from runstore.clockmodel import ClockFit, latency_stats, sequence_gaps
 from runstore.provenance import write_run_json
 from runstore.layout import event_columns
@@ -313,6 +313,7 @@ def publish(pairs: list[tuple[Path, Path]]) -> None:
 
 
 def discard(paths) -> None:
-    """Remove staging directories (best effort)."""
+    """Remove staging directories (best effort), once zarr has stopped writing into them."""
+    inflight.settle()
     for p in paths:
         shutil.rmtree(p, ignore_errors=True)

@@ -35,6 +35,7 @@ import zarr
 
 from hardware.biotac import FINGERS
 
+from . import inflight
 from .appender import GrowingArray, MetadataTemplate, atomic_write, write_all
 from .jsonvalues import jsonable, utc_now
 from .status import RunStatus
@@ -114,6 +115,7 @@ class RunStore:
                 raise FileExistsError(f"run store {path} already exists")
             os.rename(tmp, path)
         except BaseException:
+            inflight.settle()                    # an interrupt may have left zarr writing into it
             shutil.rmtree(tmp, ignore_errors=True)
             raise
         store = cls(path, zarr.open_group(str(path), mode="r+", use_consolidated=False), schema, fingers, streams)
