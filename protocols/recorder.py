@@ -45,7 +45,7 @@ log = logging.getLogger(__name__)
 
 WAKE_S = 0.02                 # wall s between the writer's looks at the clocks
 RUN_FLUSH_S = 0.75            # run s between commits of a clock faster than the wall (a simulated lab)
-MAX_BEHIND_S = 0.95           # run s a free-running (simulated) clock may run ahead of the last commit
+MAX_BEHIND_S = 0.9            # run s a free-running (simulated) clock may run ahead of the last commit
 
 
 # ----------------------------------------------------------------------------- state
@@ -61,6 +61,7 @@ class StreamStats:
     last_host_time: float | None = None
     error: str | None = None                  # set while the source is failing
     pending: list = field(default_factory=list)
+    drained_to: float | None = None           # clock time its last read began: what came before is pending
 
 
 class Recorder:
@@ -285,6 +286,7 @@ class Recorder:
         st = self._stats[name]
         while True:
             last = self._stopping.is_set()       # one more drain after stop is requested
+            began = float(self.clock.now())
             try:
                 samples = source()
             except Exception as e:               # noqa: BLE001 - any device error is recorded
@@ -294,6 +296,7 @@ class Recorder:
                 self.clock.sleep(self.retry_interval_s)
                 continue
             with self._lock:
+                st.drained_to = began
                 if samples:
                     st.pending.extend(samples)
                     st.samples += len(samples)
@@ -341,6 +344,11 @@ class Recorder:
             w0, c0 = time.monotonic(), float(self.clock.now())
             with self._lock:
                 taken = {s: st.pending for s, st in self._stats.items()}
+                # Samples received since a source's last read are not taken yet (its thread reads
+                # every poll_interval_s): this commit holds what every healthy source received
+                # before the earliest of those reads, which is what keep_up() waits for.
+                c0 = min([c0] + [st.drained_to for st in self._stats.values()
+                                 if st.drained_to is not None and st.error is None])
                 for st in self._stats.values():
                     st.pending = []
             for name, samples in taken.items():
