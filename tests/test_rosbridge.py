@@ -88,9 +88,12 @@ def test_a_killed_rosbridge_is_detected_within_a_second():
             while time.monotonic() - t0 < 3:
                 bt.latest()
                 time.sleep(0.005)
-        with pytest.raises(DeviceDisconnectedError):
-            hand.read_states()
         assert time.monotonic() - t0 < 1.0
+        with pytest.raises(DeviceDisconnectedError):          # its own link: noticed on its own
+            while time.monotonic() - t0 < 3:
+                hand.read_states()
+                time.sleep(0.005)
+        assert time.monotonic() - t0 < 1.5
         assert not bt.is_connected and not hand.is_connected
         bt.close()
         hand.close()
@@ -109,7 +112,7 @@ def test_a_hung_rosbridge_times_out(emu):
                 while time.monotonic() - t0 < 3:
                     bt.read()
                     time.sleep(0.01)
-            assert time.monotonic() - t0 < 0.8
+            assert time.monotonic() - t0 < 1.5             # the stale timeout, not the 3 s loop
         finally:
             emu.command("resume")
 

@@ -152,7 +152,7 @@ def test_disconnect_is_detected_quickly():
             while time.monotonic() - t0 < 2.0:
                 bt.read()
                 time.sleep(0.002)
-        assert time.monotonic() - t0 < 0.5
+        assert time.monotonic() - t0 < 1.0                   # its reader thread notices within a read
         assert not bt.is_connected
         bt.close()
         with pytest.raises(NotConnectedError):
