@@ -43,7 +43,7 @@ def make_store(work: Path, seconds: float = 60.0) -> Path:
         for i in range(n):
             p = ds.assign_coords({dim: ds[dim] + i * span})
             parts.append(p)
-        return xr.concat(parts, dim=dim)
+        return xr.concat(parts, dim=dim, data_vars="all")     # every variable along dim, as before
     bt = tile(b, "time")
     for var in ("electrodes", "pdc", "tdc", "tac"):
         src_v = tile(ff[[var]], "time")[var]
