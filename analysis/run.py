@@ -162,8 +162,8 @@ def _analyse(store_path: Path, run, model, cfg, console) -> dict:
                "estimates": {"crossings": a.crossings, "pour": a.pour, "slip": whole_contact_slips(a)},
                "whole_run": a.whole_run, "skipped": a.skipped, "timing": a.timing}
     staging = run_dir / f".analysis-staging-{analysis_id[:8]}"
-    staging.mkdir()
     try:
+        staging.mkdir()                          # inside: a signal right after it still removes it
         tree = results.to_datatree(a, list(model.plans), {"analysis_id": analysis_id,
                                                           "provenance": json.loads(results.dumps(provenance))},
                                    fields=cfg.save_fields)

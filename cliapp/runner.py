@@ -2,7 +2,9 @@
 
 :func:`run_app` puts the config guard (:mod:`cliapp.config_guard`) in front of Hydra and
 turns what Hydra or the guard refuses into one line and exit status 2, and a stray Ctrl-C or
-SIGTERM into one line and exit status 3.
+SIGTERM into one line and exit status 3. A Ctrl-C whose ``KeyboardInterrupt`` Python drops
+because it was raised in a finaliser (a weakref callback, ``__del__``: "Exception ignored",
+a traceback, and the program goes on) is delivered again (:func:`redeliver_dropped_interrupt`).
 """
 
 from __future__ import annotations
@@ -11,8 +13,10 @@ import atexit
 import gc
 import os
 import re
+import _thread
 import signal
 import sys
+import threading
 import traceback
 
 from runstore.status import ExitCode
@@ -35,6 +39,7 @@ def run_app(app, argv=None, step_fields=None) -> None:
     os.environ["HYDRA_FULL_ERROR"] = "1"         # Hydra raises instead of printing several lines
     if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
         signal.signal(signal.SIGTERM, signal.default_int_handler)
+    hook_before, sys.unraisablehook = sys.unraisablehook, _unraisable(sys.unraisablehook)
     try:
         install(argv)
         app()
@@ -49,11 +54,32 @@ def run_app(app, argv=None, step_fields=None) -> None:
     finally:
         for s in (signal.SIGINT, signal.SIGTERM):   # the app is done: a late signal must not turn
             signal.signal(s, signal.SIG_IGN)        # its exit status into a kill (at interpreter exit)
+        sys.unraisablehook = hook_before
         # At interpreter exit, after the other atexit handlers (logging's flush...), everything
         # left is frozen: the collections of the exit then skip it (0.3-0.8 s of a dry run's
         # exit otherwise). At exit only: a caller that goes on (a test) keeps its collector.
         atexit.unregister(gc.freeze)
         atexit.register(gc.freeze)
+
+
+def redeliver_dropped_interrupt(unraisable) -> bool:
+    """If ``unraisable`` (a :data:`sys.unraisablehook` argument) is a ``KeyboardInterrupt`` a
+    finaliser dropped on the main thread, deliver it again as a SIGINT 10 ms later and return
+    True. (Later, so that the handler does not run inside this hook, which would drop it
+    again; should it land in a finaliser once more, it is delivered once more.)"""
+    if not issubclass(unraisable.exc_type, KeyboardInterrupt) or threading.current_thread() is not threading.main_thread():
+        return False
+    later = threading.Timer(0.01, _thread.interrupt_main)
+    later.daemon = True
+    later.start()
+    return True
+
+
+def _unraisable(before):
+    def hook(unraisable):
+        if not redeliver_dropped_interrupt(unraisable):
+            before(unraisable)
+    return hook
 
 
 def report(exc: BaseException, what: str, verbose: bool = False) -> None:

@@ -23,8 +23,10 @@ SIGTERM counts as Ctrl-C. Handlers can only be installed on the main thread; els
 A signal handler runs wherever the main thread is, and Python drops an exception raised in
 a finaliser (a weakref callback, ``__del__``) after printing "Exception ignored" and a
 traceback. So :meth:`Interrupts.install` also hooks :data:`sys.unraisablehook`: a dropped
-``KeyboardInterrupt`` is noted silently as :attr:`Interrupts.deferred`, and the engine
-raises it at its next tick (:meth:`Interrupts.raise_deferred`), one poll period late.
+``KeyboardInterrupt`` of the ``motion`` phase is noted silently as :attr:`Interrupts.deferred`
+and the engine raises it at its next tick (:meth:`Interrupts.raise_deferred`), one poll
+period late; in the other phases the signal is delivered again
+(:func:`cliapp.runner.redeliver_dropped_interrupt`).
 """
 
 from __future__ import annotations
@@ -33,6 +35,8 @@ import signal
 import sys
 import threading
 from contextlib import contextmanager
+
+from cliapp.runner import redeliver_dropped_interrupt
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 RAISING = ("setup", "analysis")
@@ -87,10 +91,10 @@ class Interrupts:
             raise KeyboardInterrupt
 
     def _unraisable(self, unraisable) -> None:
-        if issubclass(unraisable.exc_type, KeyboardInterrupt):
-            self.deferred = True            # raised by a signal handler: raise it again later
-            return
-        (self._unraisable_before or sys.__unraisablehook__)(unraisable)
+        if issubclass(unraisable.exc_type, KeyboardInterrupt) and self.phase == "motion":
+            self.deferred = True            # the second Ctrl-C: the engine raises it at its next tick
+        elif not redeliver_dropped_interrupt(unraisable):
+            (self._unraisable_before or sys.__unraisablehook__)(unraisable)
 
     @contextmanager
     def during(self, phase: str, on_stop=None):

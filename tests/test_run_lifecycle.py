@@ -145,6 +145,47 @@ def test_a_second_ctrl_c_that_lands_in_a_finaliser_is_raised_at_the_next_tick_wi
     assert "Traceback" not in capsys.readouterr().err
 
 
+def test_a_ctrl_c_a_finaliser_dropped_outside_the_motion_is_delivered_again(capsys):
+    """``tactile-analyze`` (Python's own SIGINT handler) and a job's analysis phase: a
+    ``KeyboardInterrupt`` dropped in a weakref callback comes back as a SIGINT at once, so
+    one Ctrl-C still stops the program, without a traceback."""
+    import sys
+    import weakref
+
+    from cliapp.runner import _unraisable
+
+    class Thing:
+        pass
+
+    def busy():
+        for _ in range(1000):                                  # bytecodes for the signal to land on
+            time.sleep(0.001)
+
+    def raise_interrupt(_):
+        raise KeyboardInterrupt
+
+    before = sys.unraisablehook
+    sys.unraisablehook = _unraisable(before)
+    try:
+        thing = Thing()
+        ref = weakref.ref(thing, raise_interrupt)
+        with pytest.raises(KeyboardInterrupt):
+            del thing
+            busy()
+        assert ref() is None
+        interrupts = Interrupts(log=lambda _: None)
+        with interrupts.installed(), interrupts.during("analysis"):
+            thing = Thing()
+            ref = weakref.ref(thing, lambda _: interrupts.handle(signal.SIGINT))
+            with pytest.raises(KeyboardInterrupt):
+                del thing
+                busy()
+        assert interrupts.count == 2 and not interrupts.deferred    # the signal, then its delivery again
+    finally:
+        sys.unraisablehook = before
+    assert "Traceback" not in capsys.readouterr().err
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_during_the_analysis_drops_the_analysis_and_keeps_the_run(tmp_path, sig):
