@@ -9,11 +9,11 @@ a traceback, and the program goes on) is delivered again (:func:`redeliver_dropp
 
 from __future__ import annotations
 
+import _thread
 import atexit
 import gc
 import os
 import re
-import _thread
 import signal
 import sys
 import threading
