@@ -64,12 +64,16 @@ def run_app(app, argv=None, step_fields=None) -> None:
 
 def redeliver_dropped_interrupt(unraisable) -> bool:
     """If ``unraisable`` (a :data:`sys.unraisablehook` argument) is a ``KeyboardInterrupt`` a
-    finaliser dropped on the main thread, deliver it again as a SIGINT 10 ms later and return
-    True. (Later, so that the handler does not run inside this hook, which would drop it
-    again; should it land in a finaliser once more, it is delivered once more.)"""
+    finaliser dropped on the main thread, deliver it again 10 ms later, as SIGINT or (SIGINT
+    ignored, as in a program started in the background) SIGTERM, and return True. (Later, so
+    that the handler does not run inside this hook, which would drop it again; should it land
+    in a finaliser once more, it is delivered once more.)"""
     if not issubclass(unraisable.exc_type, KeyboardInterrupt) or threading.current_thread() is not threading.main_thread():
         return False
-    later = threading.Timer(0.01, _thread.interrupt_main)
+    handled = [s for s in (signal.SIGINT, signal.SIGTERM) if callable(signal.getsignal(s))]
+    if not handled:
+        return False
+    later = threading.Timer(0.01, _thread.interrupt_main, args=(handled[0],))
     later.daemon = True
     later.start()
     return True

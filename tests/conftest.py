@@ -1,3 +1,4 @@
+import signal
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -39,6 +40,14 @@ SLOW_TESTS = ("tests/test_geometry.py::test_accurate_geodesic_matches_principal_
               "tests/test_viewer.py::test_the_core_packages_never_import_rerun",
               "tests/test_architecture.py::test_importing_a_package_loads_nothing_above_it",
               "tests/test_architecture.py::test_a_run_and_its_analysis_load_neither_scipy_signal_nor_spatial")
+
+
+def pytest_configure(config):
+    """The signal tests press Ctrl-C as a terminal does. A test run started in the background
+    (``pytest &`` in a script, ``nohup``) inherits SIGINT ignored, and so would every program
+    the tests start: give them Python's own handler back."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.hookimpl(tryfirst=True)              # before `-m` deselects

@@ -181,6 +181,17 @@ def test_a_ctrl_c_a_finaliser_dropped_outside_the_motion_is_delivered_again(caps
                 del thing
                 busy()
         assert interrupts.count == 2 and not interrupts.deferred    # the signal, then its delivery again
+        # started in the background (SIGINT ignored), SIGTERM as Ctrl-C (run_app): delivered as SIGTERM
+        handlers = signal.signal(signal.SIGINT, signal.SIG_IGN), signal.signal(signal.SIGTERM, signal.default_int_handler)
+        try:
+            thing = Thing()
+            ref = weakref.ref(thing, raise_interrupt)
+            with pytest.raises(KeyboardInterrupt):
+                del thing
+                busy()
+        finally:
+            signal.signal(signal.SIGINT, handlers[0])
+            signal.signal(signal.SIGTERM, handlers[1])
     finally:
         sys.unraisablehook = before
     assert "Traceback" not in capsys.readouterr().err
