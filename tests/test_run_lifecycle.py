@@ -157,9 +157,15 @@ def test_a_ctrl_c_a_finaliser_dropped_outside_the_motion_is_delivered_again(caps
     class Thing:
         pass
 
-    def busy():
-        for _ in range(1000):                                  # bytecodes for the signal to land on
-            time.sleep(0.001)
+    def dropped_then_raised(callback):
+        """A finaliser runs ``callback``, which raises KeyboardInterrupt: it must come back."""
+        thing = Thing()
+        ref = weakref.ref(thing, callback)
+        with pytest.raises(KeyboardInterrupt):
+            del thing
+            for _ in range(1000):                              # bytecodes for the signal to land on
+                time.sleep(0.001)
+        assert ref() is None
 
     def raise_interrupt(_):
         raise KeyboardInterrupt
@@ -167,28 +173,15 @@ def test_a_ctrl_c_a_finaliser_dropped_outside_the_motion_is_delivered_again(caps
     before = sys.unraisablehook
     sys.unraisablehook = _unraisable(before)
     try:
-        thing = Thing()
-        ref = weakref.ref(thing, raise_interrupt)
-        with pytest.raises(KeyboardInterrupt):
-            del thing
-            busy()
-        assert ref() is None
+        dropped_then_raised(raise_interrupt)
         interrupts = Interrupts(log=lambda _: None)
         with interrupts.installed(), interrupts.during("analysis"):
-            thing = Thing()
-            ref = weakref.ref(thing, lambda _: interrupts.handle(signal.SIGINT))
-            with pytest.raises(KeyboardInterrupt):
-                del thing
-                busy()
+            dropped_then_raised(lambda _: interrupts.handle(signal.SIGINT))
         assert interrupts.count == 2 and not interrupts.deferred    # the signal, then its delivery again
         # started in the background (SIGINT ignored), SIGTERM as Ctrl-C (run_app): delivered as SIGTERM
         handlers = signal.signal(signal.SIGINT, signal.SIG_IGN), signal.signal(signal.SIGTERM, signal.default_int_handler)
         try:
-            thing = Thing()
-            ref = weakref.ref(thing, raise_interrupt)
-            with pytest.raises(KeyboardInterrupt):
-                del thing
-                busy()
+            dropped_then_raised(raise_interrupt)
         finally:
             signal.signal(signal.SIGINT, handlers[0])
             signal.signal(signal.SIGTERM, handlers[1])
