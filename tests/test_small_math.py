@@ -17,10 +17,9 @@ from scipy import signal as sps
 from scipy.spatial.transform import Rotation
 
 from analysis import segments as seg
-from analysis.signal1d import _savgol_coefficients
-from tactile.aggregate import _eroded
-from analysis.signal1d import find_peaks, savgol_filter
+from analysis.signal1d import _savgol_coefficients, find_peaks, savgol_filter
 from hardware.transforms import matrix_to_rotvec, rotvec_to_matrix, rotvec_to_quaternion
+from tactile.aggregate import _eroded
 
 
 def scipy_peaks(x, prominence, distance):
