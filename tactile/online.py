@@ -48,8 +48,8 @@ for latency and throughput. An :class:`OnlineFlow` is one stream's state: not fo
 concurrent use from several threads.
 
 With ``config.render = "linear"`` the frames may differ from the offline ones by one
-8-bit level at rare pixels: offline renders a chunk of frames with one float32 BLAS
-product, whose rounding depends on the number of frames in the chunk.
+8-bit level at rare pixels: offline renders :data:`tactile.frames.LINEAR_BLOCK` frames with
+one float32 BLAS product, whose rounding depends on the number of frames in the product.
 """
 
 from __future__ import annotations

@@ -132,8 +132,9 @@ class TactileModel:
         plan = self.plans[view]
         if self.config.render == "linear":
             act = finite_array("activation", activation, ndim=2, last=24).astype(np.float32)
-            out = (act @ self.operators[view].T).reshape((len(act),) + plan.shape)
-            return out if intensity_range is None else frames.to_uint8(out, *intensity_range)
+            if intensity_range is None:
+                return (act @ self.operators[view].T).reshape((len(act),) + plan.shape)
+            return frames.linear_uint8(act, self.operators[view].T, plan.shape, *intensity_range)
         # Interpolates only the view's vertices (frames.render_activation), each frame just before rendering it.
         return frames.render_activation(plan, self.mesh, self.weights, activation, self.config.scale,
                                         intensity_range)

@@ -77,6 +77,20 @@ def test_fixed_intensity_scale_keeps_brightness_comparable():
         frames.to_uint8(np.zeros((1, 4, 4)), 1.0, 1.0)
 
 
+@pytest.mark.parametrize("shape", [(), (7,), (3, 5, 6), (2, 0, 4)])
+def test_to_uint8_rounds_half_to_even_and_saturates_for_any_shape(shape):
+    """8-bit frames are (value − low)·255/(high − low) in float32, rounded half to even and
+    clipped to 0..255, whatever the array's shape, order or dtype."""
+    rng = np.random.default_rng(1)
+    values = rng.uniform(-5.0, 45.0, shape)
+    values.flat[:3] = [2.0 / 51, 6.0 / 51, 40.0][: values.size]       # exactly 0.5 and 1.5 levels; the top
+    for given in (values, values.astype(np.float32), np.asarray(values, order="F")):
+        expected = np.clip(np.rint((given.astype(np.float32) - np.float32(0)) * np.float32(255 / 40)), 0, 255)
+        got = frames.to_uint8(given, 0.0, 40.0)
+        assert got.dtype == np.uint8 and got.shape == shape
+        assert np.array_equal(got, expected.astype(np.uint8))
+
+
 def test_default_views_axes():
     cols, rows, look = frames.view_axes(frames.DEFAULT_VIEWS["bottom"])
     assert np.allclose([cols, rows, look], [[1, 0, 0], [0, 1, 0], [0, 0, 1]])

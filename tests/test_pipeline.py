@@ -34,9 +34,12 @@ def test_linear_renderer_equals_exact_without_displacement(model, rng):
     flat_cfg = replace(model.config, scale=0.0)
     exact = replace(model, config=flat_cfg)
     linear = replace(model, config=replace(flat_cfg, render="linear"))
-    act = rng.uniform(0, 4, (5, 24))
+    act = rng.uniform(0, 4, (150, 24))                  # more than two of the linear renderer's blocks
     for view in model.plans:
         assert np.allclose(exact.render(act, view), linear.render(act, view), atol=1e-4)
+        u8 = linear.render_uint8(act, view, (0.0, 4.0))
+        assert u8.dtype == np.uint8 and u8.shape == (150,) + model.plans[view].shape
+        assert np.abs(u8.astype(int) - exact.render_uint8(act, view, (0.0, 4.0))).max() <= 1
 
 
 def test_bad_input_names_the_argument(model, cache_dir):
