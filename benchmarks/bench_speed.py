@@ -102,16 +102,24 @@ def bench_workers(store: Path, work: Path, repeat: int) -> None:
     from analysis.flows import available_workers
     from analysis.run import analyze_run
     cores = available_workers()
-    walls = {}
+    walls, serial, jobs = {}, {}, {}
     for w in sorted({1, *range(2, cores + 1)}):
-        walls[w] = []
+        walls[w], serial[w], jobs[w] = [], [], []
         for i in range(repeat):
             s = fresh(store, work, f"w{w}_{i}")
             t0 = time.perf_counter()
-            analyze_run(s, {"progress": False, "figures": False, "workers": w}, console=QUIET)
+            timing = analyze_run(s, {"progress": False, "figures": False, "workers": w}, console=QUIET)["timing"]
             walls[w].append(time.perf_counter() - t0)
+            serial[w].append(walls[w][-1] - timing["flow_stage_s"])   # loading, estimates, writing
+            jobs[w].append(timing["flow_s"])                            # the (window, view) jobs, summed
         emit(stats("analysis_wall_s", walls[w], workers=w, cores=cores,
                    speedup_median=round(statistics.median(walls[1]) / statistics.median(walls[w]), 3)))
+        emit(stats("analysis_serial_wall_s", serial[w], workers=w))
+        emit(stats("analysis_flow_jobs_s", jobs[w], workers=w))
+    # Amdahl with the one-worker job time: cores that do not slow each other (this VM's do, goal 2).
+    for n in (4, 8):
+        emit({"bench": "analysis_wall_s_projected", "workers": n, "target": 2.0 if n == 8 else None,
+              "value": round(statistics.median(serial[1]) + statistics.median(jobs[1]) / n, 3)})
 
 
 def _child(cmd: list[str]) -> tuple[float, float]:
