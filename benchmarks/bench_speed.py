@@ -142,13 +142,33 @@ def bench_startup(repeat: int) -> None:
         emit({"bench": f"{cmd}_import_s", "value": round(total / 1e6, 4)})
 
 
+def reference_cpu() -> float:
+    """CPU seconds of a fixed workload (a Python loop and a numpy product, like the dry run's
+    mix): on a shared machine the same work costs more CPU when the host is busy, so a dry
+    run's CPU over this, paired, tells a slower program from a slower hour."""
+    import numpy as np
+    a = np.random.default_rng(0).random((300, 300))
+    t0 = time.process_time()
+    total = 0
+    for i in range(4_000_000):
+        total += i & 7
+    for _ in range(20):
+        a = np.tanh(a @ a / 300)
+    return time.process_time() - t0
+
+
 def bench_dryrun(work: Path, repeat: int) -> None:
     """The README's main job, ``tactile-run progress=false`` (simulation, recording, analysis,
-    figures), in a child process: its wall and CPU."""
-    runs = [_child([str(BIN / "tactile-run"), "progress=false", f"hydra.run.dir={work / f'dry{i}'}"])
-            for i in range(repeat)]
+    figures), in a child process: its wall and CPU, and its CPU over :func:`reference_cpu`
+    measured just before it."""
+    runs, refs = [], []
+    for i in range(repeat):
+        refs.append(reference_cpu())
+        runs.append(_child([str(BIN / "tactile-run"), "progress=false", f"hydra.run.dir={work / f'dry{i}'}"]))
     emit(stats("dry_run_wall_s", [w for w, _ in runs], target=8.0))
     emit(stats("dry_run_cpu_s", [c for _, c in runs]))
+    emit(stats("reference_cpu_s", refs))
+    emit(stats("dry_run_cpu_over_reference", [c / r for (_, c), r in zip(runs, refs)], paired=True))
 
 
 def simulated(protocol: str, work: Path) -> Path:
