@@ -81,9 +81,8 @@ def test_fixed_intensity_scale_keeps_brightness_comparable():
 def test_to_uint8_rounds_half_to_even_and_saturates_for_any_shape(shape):
     """8-bit frames are (value − low)·255/(high − low) in float32, rounded half to even and
     clipped to 0..255, whatever the array's shape, order or dtype."""
-    rng = np.random.default_rng(1)
-    values = rng.uniform(-5.0, 45.0, shape)
-    values.flat[:3] = [2.0 / 51, 6.0 / 51, 40.0][: values.size]       # exactly 0.5 and 1.5 levels; the top
+    assert frames.to_uint8([0.5, 1.5, 2.5, -1.0, 300.0], 0.0, 255.0).tolist() == [0, 2, 2, 0, 255]
+    values = np.random.default_rng(1).uniform(-5.0, 45.0, shape)
     for given in (values, values.astype(np.float32), np.asarray(values, order="F")):
         expected = np.clip(np.rint((given.astype(np.float32) - np.float32(0)) * np.float32(255 / 40)), 0, 255)
         got = frames.to_uint8(given, 0.0, 40.0)
