@@ -200,14 +200,17 @@ def write_store(tree, path: Path) -> None:
     """Write ``tree`` as a zarr v3 store at ``path`` (a new directory: the analysis' staging one).
 
     zarr's local store costs an asynchronous file operation per key; encoded in memory first,
-    then written as plain files, the same bytes take about a third less CPU."""
+    then written as plain files, the same bytes take about a third less CPU. The metadata is
+    consolidated once, at the root: xarray's ``consolidated=True`` consolidates again after
+    each group and writes the same bytes in ~1.5× the time."""
     import warnings
 
     import zarr
     keys: dict = {}
     with warnings.catch_warnings():      # zarr 3: fixed-length strings and consolidated metadata are
         warnings.simplefilter("ignore")  # not in the v3 spec yet (same as the run store)
-        tree.to_zarr(zarr.storage.MemoryStore(keys), mode="w", zarr_format=3, consolidated=True)
+        tree.to_zarr(zarr.storage.MemoryStore(keys), mode="w", zarr_format=3, consolidated=False)
+        zarr.consolidate_metadata(zarr.storage.MemoryStore(keys))
     for key, buffer in keys.items():
         file = path / key
         file.parent.mkdir(parents=True, exist_ok=True)
