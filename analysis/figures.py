@@ -24,6 +24,11 @@ directly): matplotlib's own text and PNG paths were half of the figures' cost.
 from __future__ import annotations
 
 import logging
+import multiprocessing
+import os
+import sys
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -333,24 +338,33 @@ def _segments_patch(segments: np.ndarray, **style):
     return PathPatch(Path(segments.reshape(-1, 2), codes), fill=False, **style)
 
 
-def flow_label(a, model, label: str, segments: list, rows: dict, cfg):
-    """One figure for every segment called ``label``: a row per finger (its middle segment)."""
+def flow_panels(a, model, segments: list, estimator):
+    """What a label's flow figure shows: ``(by_finger, picked, fields)``, the label's segments per
+    finger, each finger's middle segment as (segment, its contact flow, start, stop in the
+    window), and its mean dynamic flow field per view; ``None`` if no segment has flow. The
+    fields are OpenCV's work, done here so that :func:`flow_label` only draws."""
     by_finger: dict[str, list] = {}
     for sg in segments:
         if fl.find(a.flows, sg.finger, sg.start, sg.stop) is not None:
             by_finger.setdefault(sg.finger, []).append(sg)
     if not by_finger:
         return None
-    views = list(model.plans)
-    n = len(by_finger)
-    est = tflow.FlowEstimator(cfg.tactile.flow)
     fields, picked = [], []
     for f, sgs in by_finger.items():
         sg = sgs[len(sgs) // 2]
         cf = fl.find(a.flows, f, sg.start, sg.stop)
         s, e = sg.start - cf.window[0], sg.stop - cf.window[0]
         picked.append((sg, cf, s, e))
-        fields.append({v: _mean_field(cf, v, s, e, est) for v in views if v in cf.views})
+        fields.append({v: _mean_field(cf, v, s, e, estimator) for v in model.plans if v in cf.views})
+    return by_finger, picked, fields
+
+
+def flow_label(a, model, label: str, panels, rows: dict):
+    """One figure for every segment called ``label``: a row per finger (its middle segment);
+    ``panels``: :func:`flow_panels`."""
+    by_finger, picked, fields = panels
+    views = list(model.plans)
+    n = len(by_finger)
     rate = a.run.rate_hz
     # one scale for every arrow: the largest (field or aggregate) spans a quarter of a frame
     h_px, w_px = next(iter(model.plans.values())).shape
@@ -442,17 +456,27 @@ def plan(a, cfg) -> tuple[list[tuple[str, list]], list[str]]:
     return items[:cfg.max_segment_figures], [k for k, _ in items[cfg.max_segment_figures:]]
 
 
-def build_all(a, model, cfg):
-    """Every figure: [(file name, Figure)] and the flow labels the cap left out."""
-    out = [("electrodes.png", electrodes(a)), ("pressure.png", pressure(a)), ("taxels.png", taxels(a)),
-           ("ellipsoid.png", ellipsoid(a, model))]
+def figure_jobs(a, model, cfg) -> tuple[list[tuple[str, Callable]], list[str]]:
+    """Every figure to draw, as (file name, builder) pairs in order (a builder returns the
+    Figure; a label none of whose segments has flow gets none), and the flow labels the cap
+    left out. The builders only draw: what needs OpenCV (the flow figures' mean fields) is
+    computed here, so they can run in processes forked from this one."""
+    jobs = [("electrodes.png", partial(electrodes, a)), ("pressure.png", partial(pressure, a)),
+            ("taxels.png", partial(taxels, a)), ("ellipsoid.png", partial(ellipsoid, a, model))]
     rows = {r["segment"]: r for r in a.aggregates}
     drawn, left_out = plan(a, cfg)
+    estimator = tflow.FlowEstimator(cfg.tactile.flow)
     for label, segments in drawn:
-        fig = flow_label(a, model, label, segments, rows, cfg)
-        if fig is not None:
-            out.append((f"flow_{label}.png", fig))
-    return out, left_out
+        panels = flow_panels(a, model, segments, estimator)
+        if panels is not None:
+            jobs.append((f"flow_{label}.png", partial(flow_label, a, model, label, panels, rows)))
+    return jobs, left_out
+
+
+def build_all(a, model, cfg):
+    """Every figure: [(file name, Figure)] and the flow labels the cap left out."""
+    jobs, left_out = figure_jobs(a, model, cfg)
+    return [(name, build()) for name, build in jobs], left_out
 
 
 def _save(fig, path: Path) -> None:
@@ -469,15 +493,86 @@ def _save(fig, path: Path) -> None:
         fig.savefig(path, dpi=DPI)
 
 
-def make_all(a, model, out_dir: Path, cfg) -> tuple[list[str], list[str]]:
-    """Write every figure into ``out_dir``. Returns the file names and the segment labels whose
-    flow figure the cap ``max_segment_figures`` left out."""
-    from . import agg_canvas
-    out_dir.mkdir(parents=True, exist_ok=True)
-    try:
-        figures, left_out = build_all(a, model, cfg)
-        for name, fig in figures:
-            _save(fig, out_dir / name)
-    finally:
-        agg_canvas.clear_text_cache()            # a run's figures share their labels, not the next run's
-    return [n for n, _ in figures], left_out
+def make_all(a, model, out_dir: Path, cfg, workers: int = 1) -> tuple[list[str], list[str]]:
+    """Write every figure into ``out_dir`` (:class:`FigureWriter`). Returns the file names and the
+    segment labels whose flow figure the cap ``max_segment_figures`` left out."""
+    with FigureWriter(a, model, out_dir, cfg, workers) as writer:
+        return writer.result()
+
+
+_JOBS: list = []
+"""The figure jobs of the running :class:`FigureWriter`: its forked workers inherit them."""
+
+
+class FigureWriter:
+    """Draws a run's figures into ``out_dir`` (PNG), in ``workers`` processes forked from this
+    one while the caller goes on (writing ``analysis.zarr``), or here in :meth:`result` with
+    one worker or where the platform cannot fork. The files are the same bytes either way.
+
+    Use as a context manager: leaving it, a pool still drawing is cancelled and waited for (at
+    most the figure each worker is drawing), so ``out_dir`` can be removed safely after an
+    error or an interrupt."""
+
+    def __init__(self, a, model, out_dir: Path, cfg, workers: int = 1):
+        self.out_dir = Path(out_dir)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.jobs, self.left_out = figure_jobs(a, model, cfg)
+        self.pool, self.futures = None, []
+        workers = min(workers, len(self.jobs))
+        if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
+            from concurrent.futures import ProcessPoolExecutor
+            from . import agg_canvas             # noqa: F401 - imported once, here, not in every worker
+            _JOBS[:] = self.jobs
+            for stream in (sys.stdout, sys.stderr):
+                stream.flush()                   # else a worker would flush this process's buffered output too
+            self.pool = ProcessPoolExecutor(workers, multiprocessing.get_context("fork"), _worker_init,
+                                            (os.getpid(),))
+            self.futures = [self.pool.submit(_draw_job, i, self.out_dir) for i in range(len(self.jobs))]
+
+    def result(self) -> tuple[list[str], list[str]]:
+        """The file names written (in order) and the flow labels the cap left out; raises what a
+        figure raised."""
+        if self.pool is not None:
+            for f in self.futures:
+                f.result()
+        else:
+            from . import agg_canvas
+            try:
+                for name, build in self.jobs:
+                    _save(build(), self.out_dir / name)
+            finally:
+                agg_canvas.clear_text_cache()    # a run's figures share their labels, not the next run's
+        return [name for name, _ in self.jobs], self.left_out
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+            _JOBS.clear()
+
+
+def _worker_init(parent: int) -> None:
+    """A figure worker: the parent handles Ctrl-C and cancels the pool (SIGINT ignored here);
+    SIGTERM ends it; so does its parent's death (a killed analysis leaves no worker waiting for
+    work forever); the objects it inherited stay out of its cyclic collector's sight."""
+    import gc
+    import os
+    import signal
+    import threading
+    import time
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+    def orphaned() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.2)
+        os._exit(1)
+    threading.Thread(target=orphaned, daemon=True).start()
+    gc.freeze()
+
+
+def _draw_job(i: int, out_dir: Path) -> None:
+    name, build = _JOBS[i]
+    _save(build(), out_dir / name)

@@ -13,6 +13,7 @@ once), and what a killed analysis left behind is removed first.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import shutil
@@ -30,6 +31,7 @@ from . import figures as figs
 from . import results
 from . import score as scoring
 from .config import as_dict, load_config
+from .flows import available_workers
 from .load import AnalysisInputError, load_run, open_truth
 from .pipeline import analyse, get_model
 
@@ -164,18 +166,21 @@ def _analyse(store_path: Path, run, model, cfg, console) -> dict:
     staging = run_dir / f".analysis-staging-{analysis_id[:8]}"
     try:
         staging.mkdir()                          # inside: a signal right after it still removes it
-        tree = results.to_datatree(a, list(model.plans), {"analysis_id": analysis_id,
-                                                          "provenance": json.loads(results.dumps(provenance))},
-                                   fields=cfg.save_fields)
-        results.write_store(tree, staging / "analysis.zarr")
-        if cfg.figures:
-            summary["figures"], left_out = figs.make_all(a, model, staging / "figures", cfg)
-            if left_out:
-                summary["figures_left_out"] = {
-                    "labels": left_out, "reason": f"one flow figure per label, at most max_segment_figures="
-                                                  f"{cfg.max_segment_figures}"}
-        if score is not None:
-            (staging / "score.json").write_text(results.dumps(score))
+        # with several workers the figures are drawn in forked processes while this one writes
+        with (figs.FigureWriter(a, model, staging / "figures", cfg, cfg.workers or available_workers())
+              if cfg.figures else contextlib.nullcontext()) as drawing:
+            tree = results.to_datatree(a, list(model.plans), {"analysis_id": analysis_id,
+                                                              "provenance": json.loads(results.dumps(provenance))},
+                                       fields=cfg.save_fields)
+            results.write_store(tree, staging / "analysis.zarr")
+            if score is not None:
+                (staging / "score.json").write_text(results.dumps(score))
+            if drawing is not None:
+                summary["figures"], left_out = drawing.result()
+                if left_out:
+                    summary["figures_left_out"] = {
+                        "labels": left_out, "reason": f"one flow figure per label, at most max_segment_figures="
+                                                      f"{cfg.max_segment_figures}"}
         text = results.dumps(summary)
         (staging / "summary.json").write_text(text)
         previous = _previous_record(run_dir)

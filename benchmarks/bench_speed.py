@@ -6,7 +6,9 @@
   of ``bench_analysis.py`` against the bare dynamic Farnebäck calls on the same frames, each
   repetition paired (ratio = analysis CPU / bare flow CPU); the figures' CPU alone, and the
   ratio without them.
-- ``workers``: wall time of the same analysis (figures off) with 1, 2, … the cores available.
+- ``workers``: wall time of the same analysis with 1, 2, … the cores available, figures off and
+  on (with several workers the figures are drawn in forked processes beside the writing); the
+  serial part, and an Amdahl projection to 4 and 8 workers (figures off).
 - ``startup``: ``tactile-run --help`` and ``tactile-analyze --help`` (wall and CPU of the child).
 - ``dryrun``: the default dry run ``tactile-run progress=false`` (wall and CPU of the child).
 - ``dis``: each flow method / DIS preset on a simulated straws sweep and pour: flow CPU and the
@@ -103,23 +105,27 @@ def bench_workers(store: Path, work: Path, repeat: int) -> None:
     from analysis.run import analyze_run
     cores = available_workers()
     walls, serial, jobs = {}, {}, {}
-    for w in sorted({1, *range(2, cores + 1)}):
-        walls[w], serial[w], jobs[w] = [], [], []
-        for i in range(repeat):
-            s = fresh(store, work, f"w{w}_{i}")
-            t0 = time.perf_counter()
-            timing = analyze_run(s, {"progress": False, "figures": False, "workers": w}, console=QUIET)["timing"]
-            walls[w].append(time.perf_counter() - t0)
-            serial[w].append(walls[w][-1] - timing["flow_stage_s"])   # loading, estimates, writing
-            jobs[w].append(timing["flow_s"])                            # the (window, view) jobs, summed
-        emit(stats("analysis_wall_s", walls[w], workers=w, cores=cores,
-                   speedup_median=round(statistics.median(walls[1]) / statistics.median(walls[w]), 3)))
-        emit(stats("analysis_serial_wall_s", serial[w], workers=w))
-        emit(stats("analysis_flow_jobs_s", jobs[w], workers=w))
-    # Amdahl with the one-worker job time: cores that do not slow each other (this VM's do, goal 2).
+    for figures in (False, True):
+        for w in sorted({1, *range(2, cores + 1)}):
+            key = (w, figures)
+            walls[key], serial[key], jobs[key] = [], [], []
+            for i in range(repeat):
+                s = fresh(store, work, f"w{w}_{i}")
+                t0 = time.perf_counter()
+                timing = analyze_run(s, {"progress": False, "figures": figures, "workers": w},
+                                     console=QUIET)["timing"]
+                walls[key].append(time.perf_counter() - t0)
+                serial[key].append(walls[key][-1] - timing["flow_stage_s"])   # loading, estimates, writing, figures
+                jobs[key].append(timing["flow_s"])                              # the (window, view) jobs, summed
+            speedup = statistics.median(walls[1, figures]) / statistics.median(walls[key])
+            emit(stats("analysis_wall_s", walls[key], workers=w, cores=cores, figures=figures,
+                       speedup_median=round(speedup, 3)))
+            emit(stats("analysis_serial_wall_s", serial[key], workers=w, figures=figures))
+            emit(stats("analysis_flow_jobs_s", jobs[key], workers=w, figures=figures))
+    # Amdahl with the one-worker job time, figures off: cores that do not slow each other (this VM's do, goal 2).
     for n in (4, 8):
-        emit({"bench": "analysis_wall_s_projected", "workers": n, "target": 2.0 if n == 8 else None,
-              "value": round(statistics.median(serial[1]) + statistics.median(jobs[1]) / n, 3)})
+        emit({"bench": "analysis_wall_s_projected", "workers": n, "figures": False, "target": 2.0 if n == 8 else None,
+              "value": round(statistics.median(serial[1, False]) + statistics.median(jobs[1, False]) / n, 3)})
 
 
 def _child(cmd: list[str]) -> tuple[float, float]:

@@ -53,6 +53,55 @@ def test_a_killed_analysis_leaves_debris_that_the_next_one_removes(store):
     assert not list(store.parent.glob(".analysis-*")) and analysis_state(store.parent) == "complete"
 
 
+def _children(pid: int) -> set[int]:
+    out = set()
+    for t in Path(f"/proc/{pid}/task").glob("*/children"):
+        try:
+            out.update(int(c) for c in t.read_text().split())
+        except (FileNotFoundError, ProcessLookupError):  # a thread just ended
+            pass
+    return out
+
+
+def _cmdline(pid: int) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except (FileNotFoundError, ProcessLookupError):      # a short-lived child (git) just ended
+        return b""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads /proc (Linux)")
+def test_an_analysis_killed_while_its_figure_workers_draw_leaves_no_worker(store):
+    """The figures' forked workers end with their parent, even when it is SIGKILLed (they would
+    otherwise wait for work forever)."""
+    proc = subprocess.Popen([*ANALYZE, f"run={store}", "analysis.figures=true", "analysis.workers=2",
+                             "analysis.progress=false"], cwd=store.parent,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline, workers = time.monotonic() + 240, set()
+    while not workers and proc.poll() is None:       # forked workers: the same command line as the analysis
+        assert time.monotonic() < deadline
+        workers = {c for c in _children(proc.pid) if _cmdline(c) == _cmdline(proc.pid)}
+        time.sleep(0.002)
+    assert workers, proc.communicate()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    deadline = time.monotonic() + 5
+    try:
+        while any(_alive(c) for c in workers):
+            assert time.monotonic() < deadline, "figure workers outlived their killed analysis"
+            time.sleep(0.05)
+    finally:
+        for c in filter(_alive, workers):
+            os.kill(c, signal.SIGKILL)
+
+
 def test_an_analysis_stopped_between_its_renames_is_incomplete_never_stale(store, monkeypatch):
     """The previous analysis's ``summary.json`` never stands beside another analysis's outputs:
     it goes first, the new one comes last (the renames are interrupted after the first)."""

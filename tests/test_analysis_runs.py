@@ -1,6 +1,7 @@
 """The analysis on real simulated runs (tactile-run in a subprocess, real zarr stores)."""
 
 import json
+import multiprocessing
 import os
 import shutil
 import subprocess
@@ -171,10 +172,31 @@ def _results(summary: dict) -> dict:
 
 
 def test_workers_give_identical_results(runs, tmp_path):
-    """The (window, view) jobs on 1 or 3 threads: the same summary, to the last bit."""
-    one = analyze_run(_copy(runs["straws_sweep"], tmp_path, "one"), {**FAST, "workers": 1}, console=lambda *a: None)
-    many = analyze_run(_copy(runs["straws_sweep"], tmp_path, "many"), {**FAST, "workers": 3}, console=lambda *a: None)
-    assert json.dumps(_results(one), sort_keys=True) == json.dumps(_results(many), sort_keys=True)
+    """The (window, view) jobs on 1 or 3 threads and the figures here or in 3 forked processes:
+    the same summary, to the last bit, and the same PNG files, to the byte."""
+    results = {}
+    for workers in (1, 3):
+        store = _copy(runs["straws_sweep"], tmp_path, f"w{workers}")
+        summary = analyze_run(store, {**FAST, "figures": True, "workers": workers}, console=lambda *a: None)
+        pngs = {p.name: p.read_bytes() for p in (store.parent / "figures").iterdir()}
+        results[workers] = json.dumps(_results(summary), sort_keys=True), pngs
+    assert len(results[1][1]) == 7 and sorted(json.loads(results[1][0])["figures"]) == sorted(results[1][1])
+    assert results[1] == results[3]
+
+
+def test_a_figure_that_fails_in_a_worker_fails_the_analysis_and_leaves_nothing(runs, tmp_path, monkeypatch):
+    """A fault of one figure, drawn in a forked worker, reaches the caller as that figure's own
+    error; nothing of the analysis is left in the run directory and no worker outlives it."""
+    from analysis import figures
+
+    def broken(a):
+        raise ValueError("taxels figure: broken on purpose")
+    monkeypatch.setattr(figures, "taxels", broken)
+    store = _copy(runs["straws_sweep"], tmp_path, "broken")
+    with pytest.raises(ValueError, match="broken on purpose"):
+        analyze_run(store, {**FAST, "figures": True, "workers": 2}, console=lambda *a: None)
+    assert sorted(p.name for p in store.parent.iterdir()) == [".tactile.lock", "run.zarr"]   # the lock file stays
+    assert not multiprocessing.active_children()
 
 
 def test_static_flow_only_where_an_estimate_reads_it(runs, tmp_path):
