@@ -18,7 +18,8 @@ Figures are built on :class:`matplotlib.figure.Figure` objects (no pyplot state)
 margins (no ``tight_layout``: it costs a draw per figure); legends sit beside the axes, never
 over the curves. Stacked time panels share one time range, labelled under the bottom panel.
 They are drawn by :class:`.agg_canvas.Canvas` (each text line one cached bitmap, the PNG written
-directly): matplotlib's own text and PNG paths were half of the figures' cost.
+directly): matplotlib's own text and PNG paths were half of the figures' cost. With several
+workers, :class:`FigureWriter` draws them in processes forked from the analysis.
 """
 
 from __future__ import annotations
@@ -521,7 +522,10 @@ class FigureWriter:
         workers = min(workers, len(self.jobs))
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
             from concurrent.futures import ProcessPoolExecutor
-            from . import agg_canvas             # noqa: F401 - imported once, here, not in every worker
+
+            import matplotlib.figure  # noqa: F401 - imported once, here, not in every worker
+            import matplotlib.tri  # noqa: F401
+            from . import agg_canvas  # noqa: F401
             _JOBS[:] = self.jobs
             for stream in (sys.stdout, sys.stderr):
                 stream.flush()                   # else a worker would flush this process's buffered output too
