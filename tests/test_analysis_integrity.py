@@ -77,19 +77,38 @@ def _alive(pid: int) -> bool:
         return False
 
 
-@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads /proc (Linux)")
-def test_an_analysis_killed_while_its_figure_workers_draw_leaves_no_worker(store):
-    """The figures' forked workers end with their parent, even when it is SIGKILLed (they would
-    otherwise wait for work forever)."""
+def _analysis_with_figure_workers(store: Path) -> tuple[subprocess.Popen, set[int]]:
+    """``tactile-analyze`` (figures on, 2 workers) in a session of its own, once its figure
+    workers (forked: the same command line) are running."""
     proc = subprocess.Popen([*ANALYZE, f"run={store}", "analysis.figures=true", "analysis.workers=2",
-                             "analysis.progress=false"], cwd=store.parent,
+                             "analysis.progress=false"], cwd=store.parent, start_new_session=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline, workers = time.monotonic() + 240, set()
-    while not workers and proc.poll() is None:       # forked workers: the same command line as the analysis
+    while not workers and proc.poll() is None:
         assert time.monotonic() < deadline
         workers = {c for c in _children(proc.pid) if _cmdline(c) == _cmdline(proc.pid)}
         time.sleep(0.002)
     assert workers, proc.communicate()
+    return proc, workers
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads /proc (Linux)")
+def test_ctrl_c_while_the_figure_workers_draw_stops_the_analysis_cleanly(store):
+    """Ctrl-C at the terminal (SIGINT to the whole process group) while the figures are drawn:
+    the workers ignore it, the analysis stops them, exits as interrupted and leaves nothing."""
+    proc, workers = _analysis_with_figure_workers(store)
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 3 and "interrupted" in err, (proc.returncode, err)
+    assert not list(store.parent.glob(".analysis-*")) and analysis_state(store.parent) == "missing"
+    assert not any(_alive(c) for c in workers)
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads /proc (Linux)")
+def test_an_analysis_killed_while_its_figure_workers_draw_leaves_no_worker(store):
+    """The figures' forked workers end with their parent, even when it is SIGKILLed (they would
+    otherwise wait for work forever)."""
+    proc, workers = _analysis_with_figure_workers(store)
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=30)
     deadline = time.monotonic() + 5
