@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from tactile import contact as tcontact
@@ -106,9 +107,28 @@ class Envelope:
         last = int(np.searchsorted(self.edges, b - 1, "right")) - 1
         starts = np.maximum(self.edges[first:last + 1], a) - a
         for lo, hi, x in ((self.raw_min, self.raw_max, raw), (self.act_min, self.act_max, act)):
-            lo[first:last + 1] = np.minimum(lo[first:last + 1], np.minimum.reduceat(x, starts, axis=0))
-            hi[first:last + 1] = np.maximum(hi[first:last + 1], np.maximum.reduceat(x, starts, axis=0))
+            m = x.shape[1] * x.shape[2]
+            _fold_extremes(np.ascontiguousarray(x).reshape(len(x), m), starts,
+                           lo[first:last + 1].reshape(-1, m), hi[first:last + 1].reshape(-1, m))
         np.maximum(self.peak, np.abs(act).max(axis=0), out=self.peak)
+
+
+@numba.njit(cache=True, nogil=True)
+def _fold_extremes(x, starts, lo, hi):  # pragma: no cover - compiled
+    """``lo[s] = minimum(lo[s], x[starts[s]:starts[s + 1]].min(axis=0))`` and ``hi`` likewise
+    with the maximum (NaN propagates, as with ``np.minimum``); the last stretch runs to the end
+    of ``x`` (n, M). ``lo``, ``hi`` (len(starts), M), updated in place. One pass over ``x``:
+    ``np.minimum.reduceat`` along the frames took ~4× longer."""
+    n, m = x.shape
+    for s in range(len(starts)):
+        stop = starts[s + 1] if s + 1 < len(starts) else n
+        for t in range(starts[s], stop):
+            for j in range(m):
+                v = x[t, j]
+                if v < lo[s, j] or v != v:
+                    lo[s, j] = v
+                if v > hi[s, j] or v != v:
+                    hi[s, j] = v
 
 
 @dataclass

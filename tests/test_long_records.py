@@ -146,3 +146,7 @@ def test_the_envelope_of_stretches_is_the_envelope_of_the_whole():
         np.testing.assert_array_equal(getattr(pieces, name), getattr(whole, name))
     e = whole.edges
     assert whole.act_max[5, 1, 3] == act[e[5]:e[6], 1, 3].max()
+    raw[e[7] + 1, 0, 2] = np.nan                  # a NaN marks its stretch, as np.minimum would
+    whole.add(0, raw, act)
+    assert np.isnan(whole.raw_min[7, 0, 2]) and np.isnan(whole.raw_max[7, 0, 2])
+    assert np.isfinite(whole.raw_min[[6, 8], 0, 2]).all()
