@@ -9,8 +9,8 @@ import pytest
 DATA = Path(__file__).resolve().parent / "data"
 
 # ----------------------------------------------------------------------------- test tiers
-# `pytest` runs the fast tier (`-m 'not soak and not slow'`, pyproject.toml); `pytest -m "not soak"`
-# runs everything (what CI runs, .ci/run). `realtime` tests wait on wall-clock emulators in other
+# `pytest` runs the fast tier (`-m 'not soak and not slow'`, pyproject.toml); `-m "not soak"`
+# everything (CI, .ci/run, runs it in two parts: the `realtime` tests alone, the rest with `-n auto`). `realtime` tests wait on wall-clock emulators in other
 # processes (they are also `slow`); `slow` ones run subprocesses, whole simulated runs with their
 # analysis, or take more than a few seconds. Marks in a test module add to these tables.
 #: test modules against the wall-clock emulators (UR controller, rosbridge, serial devices)
