@@ -7,7 +7,9 @@ Two forms (both (T, H, W, 2) float32 arrays of (Δcol, Δrow) per pixel, pixels)
 - *static* flow, a reference frame → frame t: how far the pressure pattern has drifted
   while the contact itself stays put (the static-friction phase of a pour), in pixels.
 
-Methods: Farnebäck (the method's choice, OpenCV), DIS and Dual TV-L1 (opencv-contrib).
+Methods: Farnebäck (the method's choice), DIS and Dual TV-L1 (opencv-contrib). Farnebäck on
+frames too small for a pyramid level (the analysis's) runs in :mod:`tactile.farneback`, equal
+to OpenCV's to the bit and with each frame's expansion shared between its pairs; else OpenCV.
 :func:`to_mm_per_s` and :func:`to_mm` convert to physical units on the view plane.
 """
 
@@ -16,6 +18,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from . import farneback
 
 __all__ = ["DIS_PRESETS", "METHODS", "FlowConfig", "FlowEstimator", "contact_reference", "dynamic_flow",
            "loaded_reference", "static_flow", "to_mm", "to_mm_per_s"]
@@ -81,10 +85,15 @@ class FlowEstimator:
     def __call__(self, prev: np.ndarray, nxt: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Flow (H, W, 2) float32 in pixels that carries ``prev`` (H, W uint8) onto ``nxt``;
         written into ``out`` (a C-contiguous (H, W, 2) float32 array) if given."""
+        return self.pair(prev, nxt, out, inked=bool(prev.any() or nxt.any()))
+
+    def pair(self, prev: np.ndarray, nxt: np.ndarray, out: np.ndarray | None, *, inked: bool) -> np.ndarray:
+        """As calling the estimator, told whether either frame has a nonzero pixel (``inked``):
+        a sequence's callers test every frame at once, not each pair."""
         c = self.config
         if self._algo is not None:                       # a given flow would be their initial one
             flow = self._algo.calc(prev, nxt, None)
-        elif prev.any() or nxt.any():
+        elif inked:
             return self._farneback(prev, nxt, out, c.pyr_scale, c.levels, c.winsize,
                                    c.iterations, c.poly_n, c.poly_sigma, c.flags)
         else:
@@ -95,6 +104,11 @@ class FlowEstimator:
             return flow
         out[...] = flow
         return out
+
+
+def _inked(frames: np.ndarray) -> np.ndarray:
+    """(T,) bool: which of ``frames`` (T, H, W) have a nonzero pixel (one pass over all)."""
+    return frames.reshape(len(frames), -1).any(axis=1)
 
 
 def _check_frames(frames) -> np.ndarray:
@@ -117,10 +131,16 @@ def dynamic_flow(frames, *, config: FlowConfig = FlowConfig()) -> np.ndarray:
     ((2, 32, 32, 2), True)
     """
     frames = _check_frames(frames)
-    estimate = FlowEstimator(config)
     out = np.zeros(frames.shape + (2,), np.float32)
+    if farneback.supports(frames.shape, config):         # each frame expanded once, not twice
+        expanded = farneback.expand(frames, config)
+        later = np.arange(1, len(frames))
+        farneback.pair_flows(expanded, expanded, np.c_[later - 1, later], config, out=out[1:])
+        return out
+    estimate = FlowEstimator(config)
+    inked = _inked(frames)
     for t in range(1, len(frames)):
-        estimate(frames[t - 1], frames[t], out[t])
+        estimate.pair(frames[t - 1], frames[t], out[t], inked=bool(inked[t - 1] or inked[t]))
     return out
 
 
@@ -140,10 +160,15 @@ def static_flow(frames, reference, *, config: FlowConfig = FlowConfig()) -> np.n
         if ref.shape != frames.shape[1:] or ref.dtype != np.uint8:
             raise ValueError(f"reference: expected an index or a {frames.shape[1:]} uint8 frame, "
                              f"got shape {ref.shape} dtype {ref.dtype}")
-    estimate = FlowEstimator(config)
     out = np.empty(frames.shape + (2,), np.float32)
-    for frame, flow_field in zip(frames, out):
-        estimate(ref, frame, flow_field)
+    if farneback.supports(frames.shape, config):         # the reference expanded once
+        pairs = np.c_[np.zeros(len(frames), np.int64), np.arange(len(frames))]
+        return farneback.pair_flows(farneback.expand(ref, config), farneback.expand(frames, config), pairs,
+                                    config, out=out)
+    estimate = FlowEstimator(config)
+    ref_inked = bool(ref.any())
+    for frame, frame_inked, flow_field in zip(frames, _inked(frames), out):
+        estimate.pair(ref, frame, flow_field, inked=ref_inked or bool(frame_inked))
     return out
 
 
