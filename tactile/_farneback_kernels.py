@@ -262,8 +262,11 @@ def expand(frames, out, n, g, xg, xxg, ig11, ig03, ig33, ig55):
     rows = np.empty((3, w + 2 * n), np.float32)
     sums = np.empty((6, w), np.float64)
     for i in range(t):
-        _blur3(frames[i], blurred)
-        _poly_exp(blurred, out[i], n, g, xg, xxg, ig11, ig03, ig33, ig55, rows, sums)
+        if frames[i].any():
+            _blur3(frames[i], blurred)
+            _poly_exp(blurred, out[i], n, g, xg, xxg, ig11, ig03, ig33, ig55, rows, sums)
+        else:
+            out[i] = 0.0                                  # what the expansion gives, +0.0 included
 
 
 @numba.njit(cache=True, nogil=True)
