@@ -1,11 +1,14 @@
 """Speed figures of issue 15 as JSON lines (min and median of several runs, paired ratios).
 
-    python benchmarks/bench_speed.py [--repeat 3] [--only analysis,workers,startup,dryrun,dis] [--keep DIR]
+    python benchmarks/bench_speed.py [--repeat 3] [--only analysis,farneback,workers,startup,dryrun,dis] [--keep DIR]
 
 - ``analysis``: CPU of ``analyze_run`` (one worker, figures on) of the 60 s five-finger store
   of ``bench_analysis.py`` against the bare dynamic Farnebäck calls on the same frames, each
   repetition paired (ratio = analysis CPU / bare flow CPU); the figures' CPU alone, and the
   ratio without them.
+- ``farneback``: CPU per flow of the same record's frames, OpenCV's call against
+  ``tactile.farneback`` (each frame expanded once), consecutive pairs (dynamic) and pairs from
+  one reference (static), paired within each repetition; the flows are checked equal.
 - ``workers``: wall time of the same analysis with 1, 2, … the cores available, figures off and
   on (with several workers the figures are drawn in forked processes beside the writing); the
   serial part, and an Amdahl projection to 4 and 8 workers (figures off).
@@ -98,6 +101,46 @@ def bench_analysis(store: Path, work: Path, repeat: int) -> None:
     emit(stats("figures_cpu_s", figs))
     emit(stats("analysis_without_figures_over_bare_dynamic_ratio", [(f - g) / b for f, g, b in zip(full, figs, bare)],
                paired=True))
+
+
+def bench_farneback(store: Path, repeat: int) -> None:
+    import cv2
+    import numpy as np
+    from analysis.config import load_config
+    from analysis.load import load_run
+    from analysis.pipeline import analyse, get_model
+    from tactile import flow
+    cfg = load_config({"progress": False, "workers": 1})
+    a = analyse(load_run(store), cfg, get_model(cfg.tactile))
+    c = cfg.tactile.flow
+    windows = [vr.frames for cf in a.flows for vr in cf.views.values()]
+    n = sum(len(fr) for fr in windows)
+
+    def opencv(static: bool) -> list:
+        return [[cv2.calcOpticalFlowFarneback(fr[0] if static else fr[t - 1], fr[t], None, c.pyr_scale, c.levels,
+                                              c.winsize, c.iterations, c.poly_n, c.poly_sigma, c.flags)
+                 for t in range(0 if static else 1, len(fr))] for fr in windows]
+
+    def shared(static: bool) -> list:
+        return [flow.static_flow(fr, 0, config=c) if static else flow.dynamic_flow(fr, config=c)[1:] for fr in windows]
+
+    flow.dynamic_flow(windows[0][:2], config=c)                       # numba's kernels loaded
+    for static in (False, True):
+        kind = "static" if static else "dynamic"
+        pairs = n if static else n - len(windows)
+        ours, theirs = [], []
+        for _ in range(repeat):
+            t0 = time.process_time()
+            got = shared(static)
+            ours.append(time.process_time() - t0)
+            t0 = time.process_time()
+            want = opencv(static)
+            theirs.append(time.process_time() - t0)
+        equal = all(np.array_equal(g, np.asarray(w)) for g, w in zip(got, want) if len(w))
+        emit(stats(f"farneback_{kind}_us_per_pair_opencv", [x / pairs * 1e6 for x in theirs], pairs=pairs))
+        emit(stats(f"farneback_{kind}_us_per_pair_shared", [x / pairs * 1e6 for x in ours], pairs=pairs,
+                   equal_to_opencv=equal))
+        emit(stats(f"farneback_{kind}_shared_over_opencv_ratio", [o / t for o, t in zip(ours, theirs)], paired=True))
 
 
 def bench_workers(store: Path, work: Path, repeat: int) -> None:
@@ -205,7 +248,7 @@ def bench_dis(work: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--only", default="analysis,workers,startup,dryrun,dis")
+    ap.add_argument("--only", default="analysis,farneback,workers,startup,dryrun,dis")
     ap.add_argument("--keep", help="work directory to keep (default: a temporary one)")
     args = ap.parse_args()
     parts = set(args.only.split(","))
@@ -213,13 +256,15 @@ def main() -> None:
     work.mkdir(parents=True, exist_ok=True)
     if "startup" in parts:
         bench_startup(args.repeat)
-    if parts & {"analysis", "workers"}:
+    if parts & {"analysis", "farneback", "workers"}:
         from bench_analysis import make_store
         store = work / "bench" / "run.zarr"
         if not store.exists():
             store = make_store(work)
         if "analysis" in parts:
             bench_analysis(store, work, args.repeat)
+        if "farneback" in parts:
+            bench_farneback(store, args.repeat)
         if "workers" in parts:
             bench_workers(store, work, args.repeat)
     if "dryrun" in parts:

@@ -270,6 +270,19 @@ def expand(frames, out, n, g, xg, xxg, ig11, ig03, ig33, ig55):
 
 
 @numba.njit(cache=True, nogil=True)
+def advance(frame, r_prev, r_cur, field, with_flow, n, g, xg, xxg, ig11, ig03, ig33, ig55, winsize, iterations):
+    """Streaming: ``frame`` (H, W) expanded into ``r_cur``; with ``with_flow``, the flow from the
+    frame expanded in ``r_prev`` to it into ``field`` (H, W, 2)."""
+    expand(frame.reshape((1,) + frame.shape), r_cur.reshape((1,) + r_cur.shape), n, g, xg, xxg,
+           ig11, ig03, ig33, ig55)
+    if with_flow:
+        h, w = frame.shape
+        m = np.empty((h, w, 5), np.float32)
+        vsum = np.empty((w + 2 * (winsize // 2 + 1)) * 5, np.float64)
+        _flow_pair(r_prev, r_cur, field, m, vsum, winsize, iterations)
+
+
+@numba.njit(cache=True, nogil=True)
 def flows(r_from, r_to, pairs, out, winsize, iterations):
     """``out[k]`` = the flow from ``r_from[pairs[k, 0]]`` to ``r_to[pairs[k, 1]]`` for each row
     of ``pairs`` (K, 2); a row with a negative entry gives a zero flow (two empty frames)."""

@@ -26,7 +26,7 @@ import numpy as np
 
 from ._lazy import lazy_import
 
-__all__ = ["Expansions", "expand", "pair_flows", "supports"]
+__all__ = ["Expansions", "Stream", "expand", "pair_flows", "supports"]
 
 _k = lazy_import("tactile._farneback_kernels")   # numba: compiled on first use
 _MIN_PYRAMID = 32
@@ -147,3 +147,23 @@ def pair_flows(first: Expansions, second: Expansions, pairs, config, out=None) -
         out = np.empty((len(pairs),) + first.values.shape[1:3] + (2,), np.float32)
     _k.flows(first.values, second.values, todo, out, int(config.winsize), int(config.iterations))
     return out
+
+
+class Stream:
+    """The flow of each new frame from the one before, for a live stream of (H, W) uint8 frames
+    (``tactile.online``): each frame is expanded once, when it arrives, and kept for the next."""
+
+    def __init__(self, shape, config):
+        self._config = config
+        self._applicability = _applicability(int(config.poly_n), float(config.poly_sigma))
+        self._expanded = np.zeros((2,) + tuple(shape) + (5,), np.float32)
+        self._slot = 0
+
+    def push(self, frame: np.ndarray, field: np.ndarray | None = None) -> None:
+        """Take ``frame`` (H, W) uint8; if ``field`` ((H, W, 2) float32, C-contiguous) is given,
+        write into it the flow from the previously pushed frame to this one."""
+        self._slot = 1 - self._slot
+        dummy = field if field is not None else np.empty(frame.shape + (2,), np.float32)
+        _k.advance(frame, self._expanded[1 - self._slot], self._expanded[self._slot], dummy, field is not None,
+                   int(self._config.poly_n), *self._applicability, int(self._config.winsize),
+                   int(self._config.iterations))

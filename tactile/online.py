@@ -63,7 +63,7 @@ import cv2
 import numba
 import numpy as np
 
-from . import N_TAXELS, _frame_kernels, aggregate, flow, frames, signals
+from . import N_TAXELS, _frame_kernels, aggregate, farneback, flow, frames, signals
 from ._checks import finite_array
 from .pipeline import TactileModel
 
@@ -260,6 +260,10 @@ class OnlineFlow:
                        for _ in range(n_f)]
         self._estimators = [[None if self._farneback else flow.FlowEstimator(c.flow) for _ in self.views]
                             for _ in range(n_f)]
+        # Farnebäck on frames without a pyramid level: each frame expanded once, kept for the next
+        self._streams = [[farneback.Stream(model.plans[name].shape, c.flow)
+                          if self._farneback and farneback.supports(model.plans[name].shape, c.flow) else None
+                          for name in self.views] for _ in range(n_f)]
         # Argument tuples of the hot path, built once (the arrays in them are updated in place).
         self._calls = [[self._view_calls(f, v, low, gain) for v in range(n_v)] for f in range(n_f)]
 
@@ -352,8 +356,13 @@ class OnlineFlow:
                 _frame_kernels._store_u8(img, low, gain, frame)
             else:
                 _frame_kernels._render_activation_u8(*render)
+            stream = self._streams[f][v]
             if first:
                 field[:] = 0.0
+                if stream is not None:
+                    stream.push(current)
+            elif stream is not None:
+                stream.push(current, field)
             elif self._farneback:
                 cv2.calcOpticalFlowFarneback(previous, current, field, *self._flow_params)
             else:
