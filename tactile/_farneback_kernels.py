@@ -255,6 +255,17 @@ def _flow_pair(r0, r1, flow, m, vsum, winsize, iterations):
 
 
 @numba.njit(cache=True, nogil=True)
+def _expand_one(frame, out, n, g, xg, xxg, ig11, ig03, ig33, ig55, blurred, rows, sums):
+    """Polynomial expansion of ``frame`` (H, W) uint8 into ``out`` (H, W, 5); an empty frame's
+    is written as zeros (what the arithmetic gives, +0.0 included)."""
+    if frame.any():
+        _blur3(frame, blurred)
+        _poly_exp(blurred, out, n, g, xg, xxg, ig11, ig03, ig33, ig55, rows, sums)
+    else:
+        out[...] = 0.0
+
+
+@numba.njit(cache=True, nogil=True)
 def expand(frames, out, n, g, xg, xxg, ig11, ig03, ig33, ig55):
     """Polynomial expansion of every frame of ``frames`` (T, H, W) uint8 into ``out`` (T, H, W, 5)."""
     t, h, w = frames.shape
@@ -262,23 +273,17 @@ def expand(frames, out, n, g, xg, xxg, ig11, ig03, ig33, ig55):
     rows = np.empty((3, w + 2 * n), np.float32)
     sums = np.empty((6, w), np.float64)
     for i in range(t):
-        if frames[i].any():
-            _blur3(frames[i], blurred)
-            _poly_exp(blurred, out[i], n, g, xg, xxg, ig11, ig03, ig33, ig55, rows, sums)
-        else:
-            out[i] = 0.0                                  # what the expansion gives, +0.0 included
+        _expand_one(frames[i], out[i], n, g, xg, xxg, ig11, ig03, ig33, ig55, blurred, rows, sums)
 
 
 @numba.njit(cache=True, nogil=True)
-def advance(frame, r_prev, r_cur, field, with_flow, n, g, xg, xxg, ig11, ig03, ig33, ig55, winsize, iterations):
+def advance(frame, r_prev, r_cur, field, with_flow, n, g, xg, xxg, ig11, ig03, ig33, ig55, winsize, iterations,
+            blurred, rows, sums, m, vsum):
     """Streaming: ``frame`` (H, W) expanded into ``r_cur``; with ``with_flow``, the flow from the
-    frame expanded in ``r_prev`` to it into ``field`` (H, W, 2)."""
-    expand(frame.reshape((1,) + frame.shape), r_cur.reshape((1,) + r_cur.shape), n, g, xg, xxg,
-           ig11, ig03, ig33, ig55)
+    frame expanded in ``r_prev`` to it into ``field`` (H, W, 2). The scratch arrays are the
+    caller's (nothing is allocated per frame)."""
+    _expand_one(frame, r_cur, n, g, xg, xxg, ig11, ig03, ig33, ig55, blurred, rows, sums)
     if with_flow:
-        h, w = frame.shape
-        m = np.empty((h, w, 5), np.float32)
-        vsum = np.empty((w + 2 * (winsize // 2 + 1)) * 5, np.float64)
         _flow_pair(r_prev, r_cur, field, m, vsum, winsize, iterations)
 
 

@@ -24,13 +24,19 @@ from functools import lru_cache
 
 import numpy as np
 
-from ._lazy import lazy_import
 
 __all__ = ["Expansions", "Stream", "expand", "pair_flows", "supports"]
 
-_k = lazy_import("tactile._farneback_kernels")   # numba: compiled on first use
 _MIN_PYRAMID = 32
 """OpenCV builds a pyramid level only where the scaled frame is at least this many pixels."""
+
+
+def _kernels():
+    """The numba kernels, loaded (compiled on a first run) at first use. A plain import, not
+    ``tactile._lazy``: the flow jobs' threads may ask at the same moment, and an import waits
+    for another thread's; a lazy module would show them a half-initialised one."""
+    from . import _farneback_kernels
+    return _farneback_kernels
 
 
 def supports(shape, config) -> bool:
@@ -130,7 +136,7 @@ def expand(frames, config) -> Expansions:
     n = int(config.poly_n)
     g, xg, xxg, ig11, ig03, ig33, ig55 = _applicability(n, float(config.poly_sigma))
     values = np.empty(frames.shape + (5,), np.float32)
-    _k.expand(frames, values, n, g, xg, xxg, ig11, ig03, ig33, ig55)
+    _kernels().expand(frames, values, n, g, xg, xxg, ig11, ig03, ig33, ig55)
     return Expansions(values, ~frames.reshape(len(frames), -1).any(axis=1))
 
 
@@ -145,25 +151,30 @@ def pair_flows(first: Expansions, second: Expansions, pairs, config, out=None) -
     todo = np.where(both_empty[:, None], -1, pairs)
     if out is None:
         out = np.empty((len(pairs),) + first.values.shape[1:3] + (2,), np.float32)
-    _k.flows(first.values, second.values, todo, out, int(config.winsize), int(config.iterations))
+    _kernels().flows(first.values, second.values, todo, out, int(config.winsize), int(config.iterations))
     return out
 
 
 class Stream:
     """The flow of each new frame from the one before, for a live stream of (H, W) uint8 frames
-    (``tactile.online``): each frame is expanded once, when it arrives, and kept for the next."""
+    (``tactile.online``): each frame is expanded once, when it arrives, and kept for the next.
+    Every work array is made here, so that a frame allocates nothing."""
 
     def __init__(self, shape, config):
-        self._config = config
-        self._applicability = _applicability(int(config.poly_n), float(config.poly_sigma))
-        self._expanded = np.zeros((2,) + tuple(shape) + (5,), np.float32)
+        h, w = shape
+        n, winsize = int(config.poly_n), int(config.winsize)
+        self._params = (n, *_applicability(n, float(config.poly_sigma)), winsize, int(config.iterations))
+        self._expanded = np.zeros((2, h, w, 5), np.float32)
+        self._scratch = (np.empty((h, w), np.float32), np.empty((3, w + 2 * n), np.float32),
+                         np.empty((6, w), np.float64), np.empty((h, w, 5), np.float32),
+                         np.empty((w + 2 * (winsize // 2 + 1)) * 5, np.float64))
+        self._no_field = np.empty((h, w, 2), np.float32)
         self._slot = 0
+        self._advance = _kernels().advance
 
     def push(self, frame: np.ndarray, field: np.ndarray | None = None) -> None:
         """Take ``frame`` (H, W) uint8; if ``field`` ((H, W, 2) float32, C-contiguous) is given,
         write into it the flow from the previously pushed frame to this one."""
         self._slot = 1 - self._slot
-        dummy = field if field is not None else np.empty(frame.shape + (2,), np.float32)
-        _k.advance(frame, self._expanded[1 - self._slot], self._expanded[self._slot], dummy, field is not None,
-                   int(self._config.poly_n), *self._applicability, int(self._config.winsize),
-                   int(self._config.iterations))
+        self._advance(frame, self._expanded[1 - self._slot], self._expanded[self._slot],
+                      self._no_field if field is None else field, field is not None, *self._params, *self._scratch)

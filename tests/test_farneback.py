@@ -110,3 +110,27 @@ def test_each_frame_is_expanded_once_and_two_empty_frames_are_not_flowed():
     out = farneback.pair_flows(expanded, expanded, [[0, 1], [1, 2], [2, 3]], FlowConfig())
     assert not out[0].any()
     np.testing.assert_array_equal(out[1], opencv_flow(frames[1], frames[2], FlowConfig()))
+
+
+def test_threads_that_flow_at_once_in_a_fresh_process_both_get_the_kernels():
+    """The analysis's flow jobs start on several threads at once; the kernels' first load must
+    not show one of them a half-loaded module (it did with a lazy module)."""
+    import subprocess
+    import sys
+    code = """
+import threading, numpy as np
+from tactile import flow
+frames = np.zeros((3, 28, 40), np.uint8); frames[1:, 8:16, 10:20] = 200
+errors = []
+def job():
+    try:
+        flow.dynamic_flow(frames)
+    except Exception as e:
+        errors.append(repr(e))
+threads = [threading.Thread(target=job) for _ in range(4)]
+[t.start() for t in threads]; [t.join() for t in threads]
+print(errors)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
