@@ -6,8 +6,8 @@ a pair, once as the earlier one), and a static flow expands its reference once p
 Here each frame is expanded once and the pairs reuse the expansions (Farnebäck's method allows
 it: a frame's expansion does not depend on the other frame). The arithmetic is OpenCV's, step
 for step, so the flow is ``cv2.calcOpticalFlowFarneback``'s **to the bit**
-(``tests/test_farneback.py``). On 28 × 40 frames a dynamic pair costs ~0.75 of OpenCV's call
-and a static one (its reference expanded once) ~0.55 (``docs/performance.md``).
+(``tests/test_farneback.py``). On 28 × 40 frames a pair of consecutive frames costs ~0.64 of
+OpenCV's call, a pair from one reference ~0.66 (``docs/performance.md``).
 
 Covered: what the analysis uses, a single pyramid level (OpenCV builds none for frames under
 64 px with ``pyr_scale=0.5``), the box window (``flags=0``), ``poly_n`` 5 or 7, no initial flow.
@@ -23,7 +23,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-
 
 __all__ = ["Expansions", "Stream", "expand", "pair_flows", "supports"]
 
