@@ -510,9 +510,9 @@ class FigureWriter:
     one while the caller goes on (writing ``analysis.zarr``), or here in :meth:`result` with
     one worker or where the platform cannot fork. The files are the same bytes either way.
 
-    Use as a context manager: leaving it, a pool still drawing is cancelled and waited for (at
-    most the figure each worker is drawing), so ``out_dir`` can be removed safely after an
-    error or an interrupt."""
+    Use as a context manager: leaving it normally waits for every figure; leaving it on an
+    error or an interrupt cancels the pool and ends its workers (SIGTERM) before returning, so
+    ``out_dir`` can be removed safely and no worker outlives the analysis."""
 
     def __init__(self, a, model, out_dir: Path, cfg, workers: int = 1):
         self.out_dir = Path(out_dir)
@@ -551,10 +551,29 @@ class FigureWriter:
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc) -> None:
-        if self.pool is not None:
-            self.pool.shutdown(wait=True, cancel_futures=True)
+    def __exit__(self, exc_type, *exc) -> None:
+        if self.pool is None:
+            return
+        drawn = False
+        try:
+            if exc_type is None:
+                self.pool.shutdown(wait=True)
+                drawn = True
+        finally:
+            if not drawn:                        # an error or an interrupt, before or during the wait
+                self._stop_workers()
             _JOBS.clear()
+
+    def _stop_workers(self) -> None:
+        """Cancel what is queued and end the workers now (their figures are not wanted: the
+        caller removes ``out_dir``), then wait for them to be gone. A second Ctrl-C landing in
+        a pool's orderly shutdown could leave a worker waiting and the process hanging at exit."""
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        workers = list((getattr(self.pool, "_processes", None) or {}).values())
+        for process in workers:
+            process.terminate()
+        for process in workers:
+            process.join()
 
 
 def _worker_init(parent: int) -> None:
