@@ -37,17 +37,18 @@ def assert_equal_to_opencv(frames, c: FlowConfig, reference: int = 0):
 
 def real_contact_frames(model, view: str) -> np.ndarray:
     """8-bit frames of real BioTac SP contact patterns (the index finger of successive real
-    grasp readings, activation against the file's least-pressed readings), from rest into
-    the first pattern and on through the next ones: (T, H, W) uint8."""
+    grasp readings, activation against the file's least-pressed counts, as
+    ``test_real_contact`` takes them), from rest into the first pattern and on through the
+    next ones, scaled to their peak as the analysis scales a contact: (T, H, W) uint8."""
     with open(GRASPS / "biotac-palmdown-grasps.csv") as f:
-        rows = np.array([[float(x) for x in r[2:26]] for r in list(csv.reader(f))[1:]])
-    z = signals.counts_to_impedance(np.clip(rows, 1, 4094))
-    act = signals.activation(z, np.percentile(z, 95, axis=0))
+        rows = np.clip([[float(x) for x in r[2:26]] for r in list(csv.reader(f))[1:]], 1, 4094)
+    act = signals.activation(signals.counts_to_impedance(rows),
+                             signals.counts_to_impedance(np.percentile(rows, 95, axis=0)))
     pressed = act[np.argsort(act.sum(axis=1))[-4:]]                       # the four strongest readings
     keys = np.vstack([np.zeros(24), pressed])
     steps = np.linspace(0, 1, 6, endpoint=False)[:, None, None]
     seq = (keys[:-1] * (1 - steps) + keys[1:] * steps).transpose(1, 0, 2).reshape(-1, 24)
-    return model.render_uint8(seq, view, model.config.intensity_range)
+    return model.render_uint8(seq, view, (0.0, float(seq.max())))
 
 
 @pytest.mark.parametrize("view", ["bottom", "left", "right"])
