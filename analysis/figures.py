@@ -568,8 +568,8 @@ class FigureWriter:
         """Cancel what is queued and end the workers now (their figures are not wanted: the
         caller removes ``out_dir``), then wait for them to be gone. A second Ctrl-C landing in
         a pool's orderly shutdown could leave a worker waiting and the process hanging at exit."""
+        workers = list((getattr(self.pool, "_processes", None) or {}).values())   # shutdown forgets them
         self.pool.shutdown(wait=False, cancel_futures=True)
-        workers = list((getattr(self.pool, "_processes", None) or {}).values())
         for process in workers:
             process.terminate()
         for process in workers:
