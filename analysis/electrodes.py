@@ -25,7 +25,7 @@ READ_FRAMES = 20_000
 class StoredElectrodes:
     """The (T, F, 24) electrode counts (float64) of a run store, read on demand.
 
-    ``array``: the store's ``biotac/electrodes`` (an xarray variable, lazily indexed);
+    ``array``: the store's ``biotac/electrodes`` (a ``zarr.Array``, read a slice at a time);
     ``keep``: indices (K,) of the stored frames kept by the screening, ascending, or ``None``
     for all of them; ``on_error(exc)`` turns a read failure (a corrupt chunk) into the
     caller's error. Indexing with a slice of frames (and optionally a finger) returns an array:
@@ -66,7 +66,7 @@ class StoredElectrodes:
 
     def _stored(self, a: int, b: int) -> np.ndarray:
         try:
-            return np.asarray(self._array[a:b].values, float)
+            return np.asarray(self._array[a:b], float)
         except Exception as exc:  # noqa: BLE001 - the codec's own error type varies
             raise self._on_error(exc) from None
 

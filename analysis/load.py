@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runstore.reader import open_run
+from runstore.reader import data_arrays, open_group
 
 from .electrodes import StoredElectrodes, screen_counts
 
@@ -58,7 +58,7 @@ class RunData:
         config: the run's resolved config (from provenance) or {}.
         missing: groups that were absent, with what that costs.
         input_sha256: checksum of the stored arrays the analysis reads and of the frames kept.
-        tree: the store opened as an ``xarray.DataTree`` (lazy; e.g. for :func:`open_truth`).
+        tree: the store opened as a read-only ``zarr.Group`` (e.g. for :func:`open_truth`).
     """
 
     path: Path
@@ -195,19 +195,19 @@ def load_run(path, in_memory_frames: int = IN_MEMORY_FRAMES) -> RunData:
         raise AnalysisInputError(f"{path}: not a run store (expected a zarr v3 directory with zarr.json, "
                                  f"as written by tactile-run)")
     try:
-        dt = open_run(path)
+        dt = open_group(path)
     except Exception as exc:  # noqa: BLE001 - any reader error means: not readable as a run store
         raise AnalysisInputError(f"{path}: cannot be read as a run store ({type(exc).__name__}: "
                                  f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
-    groups = set(dt.children)
+    groups = set(dt.group_keys())
     if "biotac" not in groups:
         raise AnalysisInputError(f"{path}: the run store has no biotac group; nothing to analyse")
-    b = dt["biotac"].to_dataset()
-    if "electrodes" not in b or "time" not in b.coords:
+    b = dt["biotac"]
+    if "electrodes" not in b or "time" not in b:
         raise AnalysisInputError(f"{path}: biotac group without electrodes/time; nothing to analyse")
     time = _values(b, "time", path)
-    stored = StoredElectrodes(b["electrodes"].variable, None, lambda exc: _unreadable(path, "electrodes", exc))
-    fingers = [str(f) for f in b["finger"].values]
+    stored = StoredElectrodes(b["electrodes"], None, lambda exc: _unreadable(path, "electrodes", exc))
+    fingers = [str(f) for f in _values(b, "finger", path, None)]
     pdc = _values(b, "pdc", path, np.float32) if "pdc" in b else None     # counts: exact in float32
     baseline_counts = _values(b, "baseline", path) if "baseline" in b else None
     baseline_unc = _values(b, "baseline_uncertainty", path) if "baseline_uncertainty" in b else None
@@ -223,24 +223,24 @@ def load_run(path, in_memory_frames: int = IN_MEMORY_FRAMES) -> RunData:
     missing = {}
     arm_time = tcp_pose = tcp_speed = None
     if "arm" in groups:
-        a = dt["arm"].to_dataset()
-        if "tcp_pose" in a and a.sizes.get("time_arm", 0) > 1:
-            arm_time = np.asarray(a["time_arm"].values, float)
-            tcp_pose = np.asarray(a["tcp_pose"].values, float)
-            tcp_speed = np.asarray(a["tcp_speed"].values, float) if "tcp_speed" in a else None
+        a = dt["arm"]
+        if "tcp_pose" in a and "time_arm" in a and a["time_arm"].shape[0] > 1:
+            arm_time = np.asarray(a["time_arm"][...], float)
+            tcp_pose = np.asarray(a["tcp_pose"][...], float)
+            tcp_speed = np.asarray(a["tcp_speed"][...], float) if "tcp_speed" in a else None
     if arm_time is None:
         missing["arm"] = "no arm pose: world-frame directions and feature widths are skipped"
     if "events" in groups:
-        e = dt["events"].to_dataset()
+        e = dt["events"]
         details = []
-        for s in (e["detail"].values if "detail" in e else []):
+        for s in (e["detail"][...] if "detail" in e else []):
             try:
                 details.append(json.loads(str(s)) if str(s) else {})
             except json.JSONDecodeError:
                 details.append({"text": str(s)})
-        events = Events(np.asarray(e["time"].values, float) if "time" in e else np.zeros(0),
-                        [str(k) for k in e["kind"].values] if "kind" in e else [],
-                        [str(n) for n in e["name"].values] if "name" in e else [], details)
+        events = Events(np.asarray(e["time"][...], float) if "time" in e else np.zeros(0),
+                        [str(k) for k in e["kind"][...]] if "kind" in e else [],
+                        [str(n) for n in e["name"][...]] if "name" in e else [], details)
     else:
         events = Events(np.zeros(0), [], [], [])
         missing["events"] = "no events: no tare stretch (baseline fallback used), no step boundaries"
@@ -267,11 +267,11 @@ def load_run(path, in_memory_frames: int = IN_MEMORY_FRAMES) -> RunData:
                    baseline_counts=baseline_counts, baseline_uncertainty=baseline_unc, tree=dt)
 
 
-def _values(ds, name: str, path: Path, dtype=float) -> np.ndarray:
-    """``ds[name]`` as an array; a chunk that cannot be read (corrupt, truncated) is an
-    :class:`AnalysisInputError` naming the array."""
+def _values(group, name: str, path: Path, dtype=float) -> np.ndarray:
+    """``group[name]`` read whole as an array; a chunk that cannot be read (corrupt, truncated)
+    is an :class:`AnalysisInputError` naming the array."""
     try:
-        return np.asarray(ds[name].values, dtype)
+        return np.asarray(group[name][...], dtype)
     except Exception as exc:  # noqa: BLE001 - the codec's own error type varies
         raise _unreadable(path, name, exc) from None
 
@@ -285,13 +285,12 @@ def _unreadable(path: Path, name: str, exc: Exception) -> AnalysisInputError:
 def open_truth(run):
     """The ``truth`` group as {subgroup: {var: ndarray}} or ``None`` (for scoring only).
     ``run``: a :class:`RunData` (its opened store is reused) or a store's path."""
-    dt = run.tree if isinstance(run, RunData) and run.tree is not None else open_run(run)
-    if "truth" not in dt.children:
+    dt = run.tree if isinstance(run, RunData) and run.tree is not None else open_group(run)
+    if "truth" not in dt.group_keys():
         return None
     out = {}
-    for name, node in dt["truth"].children.items():
-        ds = node.to_dataset()
-        out[name] = {v: np.asarray(ds[v].values) for v in ds.data_vars}
+    for name, node in dt["truth"].groups():
+        out[name] = {v: np.asarray(a[...]) for v, a in data_arrays(node).items()}
     t0 = float(dt.attrs.get("t0_clock_s", 0.0) or 0.0)
     out["_t0"] = t0
     return out

@@ -1,4 +1,4 @@
-"""Labelled results: the ``analysis.zarr`` DataTree, ``summary.json`` and their atomic replacement.
+"""Labelled results: the ``analysis.zarr`` tree, ``summary.json`` and their atomic replacement.
 
 Layout of ``analysis.zarr`` (beside ``run.zarr``; docs/analysis.md):
 
@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from runstore.labelled import Dataset, Tree, Variable
+
 from .pipeline import AGG_FIELDS, Analysis
 
 KINDS = ("dynamic", "static")
@@ -50,19 +52,18 @@ def _clean(x):
     return x
 
 
-def _var(values, dims, units, long_name):
-    import xarray as xr
-    return xr.Variable(dims, values, attrs={"units": units, "long_name": long_name})
+def _var(values, dims, units, long_name) -> Variable:
+    return Variable(tuple(dims), values, {"units": units, "long_name": long_name})
 
 
-def to_datatree(a: Analysis, views: list[str], attrs: dict, fields: bool = False):
-    """The analysis as an ``xarray.DataTree`` (see module doc)."""
-    import xarray as xr
+def to_tree(a: Analysis, views: list[str], attrs: dict, fields: bool = False) -> Tree:
+    """The analysis as a :data:`~runstore.labelled.Tree` (see module doc), written by
+    :func:`~runstore.labelled.write_tree` and read back by ``xarray.open_datatree``."""
     t = a.run.time
     T = len(t)
     segs = a.segments
     n = len(segs)
-    seg_ds = xr.Dataset(
+    seg_ds = Dataset(
         {"label": _var(np.array([s.label for s in segs], dtype=str), ("segment",), "", "segment label"),
          "finger": _var(np.array([s.finger for s in segs], dtype=str), ("segment",), "", "finger"),
          "start": _var(np.array([t[s.start] for s in segs], float), ("segment",), "s", "segment start since run start"),
@@ -93,25 +94,25 @@ def to_datatree(a: Analysis, views: list[str], attrs: dict, fields: bool = False
              "magnitude": "magnitude of the mean flow", "direction": "direction of the mean flow in the image",
              "curl": "mean curl", "divergence": "mean divergence", "rotation": "rotation (curl / 2)",
              "confidence": "fraction of footprint pixels moving"}
-    agg_ds = xr.Dataset({f: _var(agg[f], ("segment", "view", "kind"), units[f], names[f]) for f in AGG_FIELDS},
+    agg_ds = Dataset({f: _var(agg[f], ("segment", "view", "kind"), units[f], names[f]) for f in AGG_FIELDS},
                         coords={"segment": np.arange(n, dtype=np.int64), "view": np.array(views, dtype=str),
                                 "kind": np.array(KINDS, dtype=str), "axis3": np.array(["x", "y", "z"], dtype=str)})
-    agg_ds["cop"] = _var(cop, ("segment", "axis3"), "mm", "centre of pressure (sensor frame)")
-    agg_ds["cop_displacement"] = _var(disp, ("segment", "axis3"), "mm", "centre-of-pressure displacement over the segment")
+    agg_ds.data_vars["cop"] = _var(cop, ("segment", "axis3"), "mm", "centre of pressure (sensor frame)")
+    agg_ds.data_vars["cop_displacement"] = _var(disp, ("segment", "axis3"), "mm", "centre-of-pressure displacement over the segment")
     fingers = sorted({r["finger"] for r in a.whole_run}, key=a.run.fingers.index)
     whole = {f: np.full((len(fingers), len(views), 2), np.nan) for f in AGG_FIELDS}
     for r in a.whole_run:
         if r["view"] in views:
             for f in AGG_FIELDS:
                 whole[f][fingers.index(r["finger"]), views.index(r["view"]), KINDS.index(r["kind"])] = r[f]
-    whole_ds = xr.Dataset({f: _var(whole[f], ("finger", "view", "kind"), units[f], names[f] + " (all in-contact frames)")
+    whole_ds = Dataset({f: _var(whole[f], ("finger", "view", "kind"), units[f], names[f] + " (all in-contact frames)")
                            for f in AGG_FIELDS},
                           coords={"finger": np.array(fingers, dtype=str), "view": np.array(views, dtype=str),
                                   "kind": np.array(KINDS, dtype=str)})
     cr = a.crossings
     m = len(cr)
     get = lambda k: np.array([c.get(k, np.nan) for c in cr], float)  # noqa: E731
-    cr_ds = xr.Dataset(
+    cr_ds = Dataset(
         {"finger": _var(np.array([c["finger"] for c in cr], dtype=str), ("crossing",), "", "finger"),
          "feature": _var(np.array([c["feature"] for c in cr], np.int64), ("crossing",), "1", "feature index (order crossed)"),
          "peak_time": _var(get("peak_time"), ("crossing",), "s", "time of the pressure peak"),
@@ -130,37 +131,36 @@ def to_datatree(a: Analysis, views: list[str], attrs: dict, fields: bool = False
          "texture_angle": _var(get("texture_angle_deg"), ("crossing",), "degree",
                                "angle between the feature's ridge and the direction of motion")},
         coords={"crossing": np.arange(m, dtype=np.int64), "axis3": np.array(["x", "y", "z"], dtype=str)})
-    tree = {"/": xr.Dataset(attrs=attrs), "/segments": seg_ds, "/aggregates": agg_ds, "/whole_run": whole_ds,
+    tree = {"/": Dataset(attrs=attrs), "/segments": seg_ds, "/aggregates": agg_ds, "/whole_run": whole_ds,
             "/estimates/crossings": cr_ds, "/estimates/slip": slip_dataset(a)}
     if a.pour:
         phases = list(a.pour["onsets"])
-        tree["/estimates/pour"] = xr.Dataset(
+        tree["/estimates/pour"] = Dataset(
             {"onset": _var(np.array([np.nan if a.pour["onsets"][p] is None else a.pour["onsets"][p] for p in phases]),
                            ("phase",), "s", "phase onset (median over grasp fingers)")},
             coords={"phase": np.array(phases, dtype=str)})
     if fields:
         for i, cf in enumerate(a.flows):
             for v, vr in cf.views.items():
-                ds = xr.Dataset({"frames": _var(vr.frames, ("time", "row", "col"), "1", "tactile frame (0..255)")},
+                ds = Dataset({"frames": _var(vr.frames, ("time", "row", "col"), "1", "tactile frame (0..255)")},
                                 coords={"time": t[cf.window[0]:cf.window[1]]},
                                 attrs={"finger": cf.finger, "view": v})
                 if vr.dynamic_field is not None:
-                    ds["dynamic"] = _var(vr.dynamic_field, ("time", "row", "col", "component"), "px frame-1",
+                    ds.data_vars["dynamic"] = _var(vr.dynamic_field, ("time", "row", "col", "component"), "px frame-1",
                                          "dynamic flow (col, row)")
                 if vr.static_field is not None:
-                    ds["static"] = _var(vr.static_field, ("time", "row", "col", "component"), "px",
+                    ds.data_vars["static"] = _var(vr.static_field, ("time", "row", "col", "component"), "px",
                                         "static flow (col, row)")
                 tree[f"/fields/{cf.finger}_{i}_{v}"] = ds
-    return xr.DataTree.from_dict(tree)
+    return tree
 
 
 EVIDENCE = ("static_unloaded", "static_onset", "dynamic", "cop_unloaded", "cop_onset")
 
 
-def slip_dataset(a: Analysis):
+def slip_dataset(a: Analysis) -> Dataset:
     """``/estimates/slip`` (segment): the slip estimate of every segment that has one, with the
     evidence vectors beside it (see :mod:`analysis.slip`)."""
-    import xarray as xr
     ids = sorted(a.slips)
     rows = [a.slips[i] for i in ids]
     num = lambda k: np.array([np.nan if r[k] is None else r[k] for r in rows], float)  # noqa: E731
@@ -174,7 +174,7 @@ def slip_dataset(a: Analysis):
         for j, name in enumerate(("static_onset", "dynamic")):
             rot = r["evidence"].get(name, {}).get("rotation_deg")
             ev_rot[i, j] = np.nan if rot is None else rot
-    return xr.Dataset(
+    return Dataset(
         {"slip_class": _var(np.array([r["slip_class"] or "" for r in rows], dtype=str), ("segment",), "",
                             "translation | rotation | none (touch)"),
          "slip_direction_sensor": _var(num("slip_direction_sensor_deg"), ("segment",), "degree",
@@ -194,27 +194,6 @@ def slip_dataset(a: Analysis):
         coords={"segment": np.array(ids, dtype=np.int64), "source": np.array(EVIDENCE, dtype=str),
                 "axis2": np.array(["x", "y"], dtype=str),
                 "rotation_source": np.array(["static_onset", "dynamic"], dtype=str)})
-
-
-def write_store(tree, path: Path) -> None:
-    """Write ``tree`` as a zarr v3 store at ``path`` (a new directory: the analysis' staging one).
-
-    zarr's local store costs an asynchronous file operation per key; encoded in memory first,
-    then written as plain files, the same bytes take about a third less CPU. The metadata is
-    consolidated once, at the root: xarray's ``consolidated=True`` consolidates again after
-    each group and writes the same bytes in ~1.5× the time."""
-    import warnings
-
-    import zarr
-    keys: dict = {}
-    with warnings.catch_warnings():      # zarr 3: fixed-length strings and consolidated metadata are
-        warnings.simplefilter("ignore")  # not in the v3 spec yet (same as the run store)
-        tree.to_zarr(zarr.storage.MemoryStore(keys), mode="w", zarr_format=3, consolidated=False)
-        zarr.consolidate_metadata(zarr.storage.MemoryStore(keys))
-    for key, buffer in keys.items():
-        file = path / key
-        file.parent.mkdir(parents=True, exist_ok=True)
-        file.write_bytes(buffer.to_bytes())
 
 
 def atomic_write_text(path: Path, text: str) -> None:

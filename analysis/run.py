@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from cliapp.heap import long_lived_frozen
-from runstore import inflight, rundir
+from runstore import inflight, labelled, rundir
 from runstore.provenance import git_state
 
 from . import figures as figs
@@ -169,10 +169,10 @@ def _analyse(store_path: Path, run, model, cfg, console) -> dict:
         # with several workers the figures are drawn in forked processes while this one writes
         with (figs.FigureWriter(a, model, staging / "figures", cfg, cfg.workers or available_workers())
               if cfg.figures else contextlib.nullcontext()) as drawing:
-            tree = results.to_datatree(a, list(model.plans), {"analysis_id": analysis_id,
-                                                              "provenance": json.loads(results.dumps(provenance))},
-                                       fields=cfg.save_fields)
-            results.write_store(tree, staging / "analysis.zarr")
+            tree = results.to_tree(a, list(model.plans), {"analysis_id": analysis_id,
+                                                          "provenance": json.loads(results.dumps(provenance))},
+                                   fields=cfg.save_fields)
+            labelled.write_tree(tree, staging / "analysis.zarr")
             if score is not None:
                 (staging / "score.json").write_text(results.dumps(score))
             if drawing is not None:

@@ -8,7 +8,10 @@ module                 holds
                        version, the time-coordinate names
 :mod:`.writer`         :class:`RunStore`: create, append, commit (the commit protocol)
 :mod:`.appender`       the growing arrays' chunks and ``zarr.json`` files, written directly
-:mod:`.reader`         :func:`open_run` and the schema-version check
+:mod:`.reader`         :func:`open_run` (xarray), :func:`open_group` (zarr) and the
+                       schema-version check
+:mod:`.labelled`       labelled arrays written as xarray writes them, without xarray
+                       (``analysis.zarr``)
 :mod:`.recover`        ``tactile-recover``: close a store its writer never closed
 :mod:`.clockmodel`     device clock → host clock (lower-envelope fit)
 :mod:`.provenance`     what ran, from which code, on which machine; ``run.json``

@@ -1,5 +1,7 @@
 """Reading a run store: :func:`open_run` (the whole store as an ``xarray.DataTree``, at its
-last commit) and :func:`check_version` (the schema versions this reader understands).
+last commit), :func:`open_group` (the same state as a read-only ``zarr.Group``: plain arrays
+for the analysis, without xarray's import cost) and :func:`check_version` (the schema
+versions this reader understands).
 
 Stores of schema 1.x open as they are; a store of a newer major version is refused with
 one line naming the versions, never misread.
@@ -35,3 +37,21 @@ def open_run(path):
     tree = xr.open_datatree(str(path), engine="zarr", consolidated=True)
     check_version(tree.attrs, str(Path(path)))
     return tree
+
+
+def open_group(path):
+    """The run store at ``path`` as a read-only ``zarr.Group``, through the consolidated metadata
+    (the state of its last commit, as :func:`open_run`); a store of an unknown major schema
+    version is refused. ``group["biotac/time"][...]`` reads an array whole."""
+    import zarr
+    group = zarr.open_group(str(path), mode="r", use_consolidated=True)
+    check_version(group.attrs, str(Path(path)))
+    return group
+
+
+def data_arrays(group) -> dict:
+    """The arrays of one group that xarray counts as data variables (not named after a
+    dimension), by name."""
+    arrays = dict(group.arrays())
+    dims = {d for a in arrays.values() for d in (a.metadata.dimension_names or ())}
+    return {name: a for name, a in arrays.items() if name not in dims}

@@ -1,36 +1,57 @@
-"""analysis.zarr as written by analysis.results.write_store: the same files as xarray's own
-consolidated writer, readable by xarray with every group in the root's consolidated metadata."""
+"""analysis.zarr as written by runstore.labelled.write_tree: the same files as xarray's own
+consolidated writer, readable by xarray with every group in the root's consolidated metadata,
+and written without importing xarray."""
 
 import json
+import subprocess
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
-from analysis import results
+from runstore.labelled import Dataset, Variable, to_xarray, write_tree
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
-def _tree() -> xr.DataTree:
-    seg = xr.Dataset({"start": ("segment", np.array([0.5, 1.5])), "label": ("segment", np.array(["before", "during"]))},
-                     coords={"segment": np.arange(2)})
-    agg = xr.Dataset({"magnitude": (("segment", "view"), np.arange(6.0).reshape(2, 3), {"units": "mm/s"})},
-                     coords={"segment": np.arange(2), "view": np.array(["bottom", "left", "right"])})
-    crossings = xr.Dataset({"width": ("crossing", np.array([2.0, np.nan]), {"units": "mm"})})
-    return xr.DataTree.from_dict({"/": xr.Dataset(attrs={"analysis_id": "abc"}), "/segments": seg,
-                                  "/aggregates": agg, "/estimates/crossings": crossings})
+def _tree():
+    """Every kind of array analysis.zarr holds: float64 with NaN, float32 and uint8 fields,
+    int64, fixed-length strings, an empty dimension, a group below a group with no data."""
+    mm = {"units": "mm", "long_name": "width"}
+    return {
+        "/": Dataset(attrs={"analysis_id": "abc", "provenance": {"config": {"a": 1}, "code": None}}),
+        "/segments": Dataset({"start": Variable(("segment",), np.array([0.5, 1.5]), {"units": "s", "long_name": "s"}),
+                              "label": Variable(("segment",), np.array(["before", "during"]))},
+                             coords={"segment": np.arange(2)}),
+        "/aggregates": Dataset({"magnitude": Variable(("segment", "view"), np.arange(6.0).reshape(2, 3),
+                                                      {"units": "mm/s"})},
+                               coords={"segment": np.arange(2), "view": np.array(["bottom", "left", "right"]),
+                                       "axis3": np.array(["x", "y", "z"])}),
+        "/estimates/crossings": Dataset({"width": Variable(("crossing",), np.array([2.0, np.nan]), mm),
+                                         "rank": Variable(("crossing",), np.array([1, -1], np.int64))}),
+        "/estimates/none": Dataset({"width": Variable(("crossing",), np.zeros(0), mm),
+                                    "finger": Variable(("crossing",), np.array([], dtype=str))},
+                                   coords={"crossing": np.arange(0, dtype=np.int64)}),
+        "/fields/ff_0_bottom": Dataset(
+            {"frames": Variable(("time", "row", "col"), np.arange(2 * 3 * 4, dtype=np.uint8).reshape(2, 3, 4)),
+             "dynamic": Variable(("time", "row", "col", "component"), np.full((2, 3, 4, 2), 0.25, np.float32))},
+            coords={"time": np.array([0.0, 0.01])}, attrs={"finger": "ff", "view": "bottom"}),
+    }
 
 
 def _files(root):
     return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
 
 
-def test_write_store_writes_what_xarrays_consolidated_writer_writes(tmp_path):
+def test_write_tree_writes_what_xarrays_consolidated_writer_writes(tmp_path):
     tree = _tree()
     (tmp_path / "ours").mkdir()
-    results.write_store(tree, tmp_path / "ours" / "analysis.zarr")
+    write_tree(tree, tmp_path / "ours" / "analysis.zarr")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        tree.to_zarr(str(tmp_path / "xarray.zarr"), mode="w", zarr_format=3, consolidated=True)
+        to_xarray(tree).to_zarr(str(tmp_path / "xarray.zarr"), mode="w", zarr_format=3, consolidated=True)
     ours, theirs = _files(tmp_path / "ours" / "analysis.zarr"), _files(tmp_path / "xarray.zarr")
     assert ours.keys() == theirs.keys()
     assert [k for k in ours if ours[k] != theirs[k]] == []
@@ -41,3 +62,27 @@ def test_write_store_writes_what_xarrays_consolidated_writer_writes(tmp_path):
     assert back["aggregates"]["magnitude"].attrs["units"] == "mm/s"
     assert back["segments"]["label"].values.tolist() == ["before", "during"]
     assert np.isnan(back["estimates/crossings"]["width"].values[1])
+    assert back["estimates/none"].sizes["crossing"] == 0
+    assert back["fields/ff_0_bottom"]["dynamic"].dtype == np.float32
+    assert back.attrs["provenance"] == {"config": {"a": 1}, "code": None}
+
+
+def test_writing_an_analysis_and_reading_its_run_import_no_xarray(tmp_path):
+    """xarray (with pandas, ~0.6 s on one core) is for users reading the stores; the analysis
+    reads run.zarr and writes analysis.zarr without it."""
+    code = ("import sys, numpy as np\n"
+            "from runstore import RunStore\n"
+            "from runstore.labelled import Dataset, Variable, write_tree\n"
+            "from analysis.load import load_run\n"
+            f"s = RunStore.create({str(tmp_path / 'run.zarr')!r}, protocol='t')\n"
+            "t = np.arange(5) * 0.01\n"
+            "s.append('biotac', {'time': t, 'device_time': t, 'host_time': t, 'seq': np.arange(5),\n"
+            "                    'electrodes': np.full((5, 5, 24), 2000), 'pdc': np.full((5, 5), 1900),\n"
+            "                    'tdc': np.zeros((5, 5)), 'tac': np.zeros((5, 5)), 'valid': np.ones(5, bool)})\n"
+            "s.commit(); s.close('success')\n"
+            "run = load_run(s.path)\n"
+            f"write_tree({{'/x': Dataset({{'t': Variable(('time',), run.time)}})}}, __import__('pathlib').Path({str(tmp_path)!r}) / 'a.zarr')\n"
+            "print(len(run.time), sorted(m for m in ('xarray', 'pandas') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["5", "[]"]
