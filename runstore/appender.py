@@ -136,7 +136,7 @@ class GrowingArray:
         else:
             chunk = np.full((self.chunk, *self.row_shape), self.fill, self.dtype)
             chunk[:len(rows)] = rows
-        if _all_fill(chunk, self.fill):
+        if all_fill(chunk, self.fill):
             return None
         raw = numcodecs.VLenUTF8().encode(chunk) if self._text else np.ascontiguousarray(chunk).tobytes()
         return bytes(self._zstd.encode(raw)) if self._zstd is not None else bytes(raw)
@@ -236,7 +236,7 @@ def atomic_write(path: Path, data: bytes) -> None:
         raise
 
 
-def _all_fill(chunk: np.ndarray, fill) -> bool:
+def all_fill(chunk: np.ndarray, fill) -> bool:
     """Whether every element is the fill value, as zarr decides it (NaN equals NaN; a zero
     float fill compares bit patterns, so -0.0 is data)."""
     if chunk.dtype.kind == "f":

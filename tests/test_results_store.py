@@ -18,12 +18,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _tree():
     """Every kind of array analysis.zarr holds: float64 with NaN, float32 and uint8 fields,
-    int64, fixed-length strings, an empty dimension, a group below a group with no data."""
+    int64, bool, fixed-length strings, an empty dimension, a group below a group with no data."""
     mm = {"units": "mm", "long_name": "width"}
     return {
         "/": Dataset(attrs={"analysis_id": "abc", "provenance": {"config": {"a": 1}, "code": None}}),
         "/segments": Dataset({"start": Variable(("segment",), np.array([0.5, 1.5]), {"units": "s", "long_name": "s"}),
-                              "label": Variable(("segment",), np.array(["before", "during"]))},
+                              "label": Variable(("segment",), np.array(["before", "during"])),
+                              "moved": Variable(("segment",), np.array([True, False]))},
                              coords={"segment": np.arange(2)}),
         "/aggregates": Dataset({"magnitude": Variable(("segment", "view"), np.arange(6.0).reshape(2, 3),
                                                       {"units": "mm/s"})},
@@ -38,7 +39,17 @@ def _tree():
             {"frames": Variable(("time", "row", "col"), np.arange(2 * 3 * 4, dtype=np.uint8).reshape(2, 3, 4)),
              "dynamic": Variable(("time", "row", "col", "component"), np.full((2, 3, 4, 2), 0.25, np.float32))},
             coords={"time": np.array([0.0, 0.01])}, attrs={"finger": "ff", "view": "bottom"}),
+        "/fields/th_1_left": Dataset({"dynamic": Variable(("time", "row", "col", "component"), _long_field())},
+                                     coords={"time": np.arange(301) * 0.01}),
     }
+
+
+def _long_field():
+    """A field zarr splits into chunks along every axis, with edge chunks and chunks that hold
+    only NaN (which are not written)."""
+    field = np.random.default_rng(0).normal(size=(301, 28, 40, 2)).astype(np.float32)
+    field[:151, :14] = np.nan                  # chunks of (151, 14, 20, 2): two hold only NaN
+    return field
 
 
 def _files(root):
@@ -64,6 +75,8 @@ def test_write_tree_writes_what_xarrays_consolidated_writer_writes(tmp_path):
     assert np.isnan(back["estimates/crossings"]["width"].values[1])
     assert back["estimates/none"].sizes["crossing"] == 0
     assert back["fields/ff_0_bottom"]["dynamic"].dtype == np.float32
+    np.testing.assert_array_equal(back["fields/th_1_left"]["dynamic"].values, _long_field())
+    assert len([k for k in ours if k.startswith("fields/th_1_left/dynamic/c/")]) == 2 * 2 * 2 - 2
     assert back.attrs["provenance"] == {"config": {"a": 1}, "code": None}
 
 
