@@ -9,6 +9,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 import xarray as xr
 
 from runstore.labelled import Dataset, Variable, to_xarray, write_tree
@@ -80,21 +81,39 @@ def test_write_tree_writes_what_xarrays_consolidated_writer_writes(tmp_path):
     assert back.attrs["provenance"] == {"config": {"a": 1}, "code": None}
 
 
+def _store(path: Path) -> Path:
+    from runstore import RunStore
+    s = RunStore.create(path, protocol="t")
+    t = np.arange(5) * 0.01
+    s.append("biotac", {"time": t, "device_time": t, "host_time": t, "seq": np.arange(5),
+                        "electrodes": np.full((5, 5, 24), 2000), "pdc": np.full((5, 5), 1900),
+                        "tdc": np.zeros((5, 5)), "tac": np.zeros((5, 5)), "valid": np.ones(5, bool)})
+    s.commit()
+    s.close("success")
+    return path
+
+
+def test_the_analysis_refuses_a_store_of_a_newer_major_schema_version(tmp_path):
+    from analysis.load import AnalysisInputError, load_run
+    store = _store(tmp_path / "run.zarr")
+    meta = json.loads((store / "zarr.json").read_text())
+    meta["attributes"]["schema_version"] = "2.0"
+    (store / "zarr.json").write_text(json.dumps(meta))
+    with pytest.raises(AnalysisInputError, match=r"schema_version '2.0' is newer than this reader's"):
+        load_run(store)
+
+
 def test_writing_an_analysis_and_reading_its_run_import_no_xarray(tmp_path):
     """xarray (with pandas, ~0.6 s on one core) is for users reading the stores; the analysis
     reads run.zarr and writes analysis.zarr without it."""
-    code = ("import sys, numpy as np\n"
-            "from runstore import RunStore\n"
+    store = _store(tmp_path / "run.zarr")
+    code = ("import sys\n"
+            "from pathlib import Path\n"
             "from runstore.labelled import Dataset, Variable, write_tree\n"
             "from analysis.load import load_run\n"
-            f"s = RunStore.create({str(tmp_path / 'run.zarr')!r}, protocol='t')\n"
-            "t = np.arange(5) * 0.01\n"
-            "s.append('biotac', {'time': t, 'device_time': t, 'host_time': t, 'seq': np.arange(5),\n"
-            "                    'electrodes': np.full((5, 5, 24), 2000), 'pdc': np.full((5, 5), 1900),\n"
-            "                    'tdc': np.zeros((5, 5)), 'tac': np.zeros((5, 5)), 'valid': np.ones(5, bool)})\n"
-            "s.commit(); s.close('success')\n"
-            "run = load_run(s.path)\n"
-            f"write_tree({{'/x': Dataset({{'t': Variable(('time',), run.time)}})}}, __import__('pathlib').Path({str(tmp_path)!r}) / 'a.zarr')\n"
+            f"run = load_run({str(store)!r})\n"
+            "tree = {'/x': Dataset({'t': Variable(('time',), run.time)})}\n"
+            f"write_tree(tree, Path({str(tmp_path / 'analysis.zarr')!r}))\n"
             "print(len(run.time), sorted(m for m in ('xarray', 'pandas') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
