@@ -95,10 +95,11 @@ def to_tree(a: Analysis, views: list[str], attrs: dict, fields: bool = False) ->
              "curl": "mean curl", "divergence": "mean divergence", "rotation": "rotation (curl / 2)",
              "confidence": "fraction of footprint pixels moving"}
     agg_ds = Dataset({f: _var(agg[f], ("segment", "view", "kind"), units[f], names[f]) for f in AGG_FIELDS},
-                        coords={"segment": np.arange(n, dtype=np.int64), "view": np.array(views, dtype=str),
-                                "kind": np.array(KINDS, dtype=str), "axis3": np.array(["x", "y", "z"], dtype=str)})
+                     coords={"segment": np.arange(n, dtype=np.int64), "view": np.array(views, dtype=str),
+                             "kind": np.array(KINDS, dtype=str), "axis3": np.array(["x", "y", "z"], dtype=str)})
     agg_ds.data_vars["cop"] = _var(cop, ("segment", "axis3"), "mm", "centre of pressure (sensor frame)")
-    agg_ds.data_vars["cop_displacement"] = _var(disp, ("segment", "axis3"), "mm", "centre-of-pressure displacement over the segment")
+    agg_ds.data_vars["cop_displacement"] = _var(disp, ("segment", "axis3"), "mm",
+                                                "centre-of-pressure displacement over the segment")
     fingers = sorted({r["finger"] for r in a.whole_run}, key=a.run.fingers.index)
     whole = {f: np.full((len(fingers), len(views), 2), np.nan) for f in AGG_FIELDS}
     for r in a.whole_run:
@@ -106,9 +107,9 @@ def to_tree(a: Analysis, views: list[str], attrs: dict, fields: bool = False) ->
             for f in AGG_FIELDS:
                 whole[f][fingers.index(r["finger"]), views.index(r["view"]), KINDS.index(r["kind"])] = r[f]
     whole_ds = Dataset({f: _var(whole[f], ("finger", "view", "kind"), units[f], names[f] + " (all in-contact frames)")
-                           for f in AGG_FIELDS},
-                          coords={"finger": np.array(fingers, dtype=str), "view": np.array(views, dtype=str),
-                                  "kind": np.array(KINDS, dtype=str)})
+                        for f in AGG_FIELDS},
+                       coords={"finger": np.array(fingers, dtype=str), "view": np.array(views, dtype=str),
+                               "kind": np.array(KINDS, dtype=str)})
     cr = a.crossings
     m = len(cr)
     get = lambda k: np.array([c.get(k, np.nan) for c in cr], float)  # noqa: E731
@@ -143,14 +144,14 @@ def to_tree(a: Analysis, views: list[str], attrs: dict, fields: bool = False) ->
         for i, cf in enumerate(a.flows):
             for v, vr in cf.views.items():
                 ds = Dataset({"frames": _var(vr.frames, ("time", "row", "col"), "1", "tactile frame (0..255)")},
-                                coords={"time": t[cf.window[0]:cf.window[1]]},
-                                attrs={"finger": cf.finger, "view": v})
+                             coords={"time": t[cf.window[0]:cf.window[1]]},
+                             attrs={"finger": cf.finger, "view": v})
                 if vr.dynamic_field is not None:
-                    ds.data_vars["dynamic"] = _var(vr.dynamic_field, ("time", "row", "col", "component"), "px frame-1",
-                                         "dynamic flow (col, row)")
+                    ds.data_vars["dynamic"] = _var(vr.dynamic_field, ("time", "row", "col", "component"),
+                                                   "px frame-1", "dynamic flow (col, row)")
                 if vr.static_field is not None:
                     ds.data_vars["static"] = _var(vr.static_field, ("time", "row", "col", "component"), "px",
-                                        "static flow (col, row)")
+                                                  "static flow (col, row)")
                 tree[f"/fields/{cf.finger}_{i}_{v}"] = ds
     return tree
 
