@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from runstore import RunStore
 from runstore.labelled import Dataset, Variable, to_xarray, write_tree
+from test_store import biotac_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -82,12 +84,8 @@ def test_write_tree_writes_what_xarrays_consolidated_writer_writes(tmp_path):
 
 
 def _store(path: Path) -> Path:
-    from runstore import RunStore
     s = RunStore.create(path, protocol="t")
-    t = np.arange(5) * 0.01
-    s.append("biotac", {"time": t, "device_time": t, "host_time": t, "seq": np.arange(5),
-                        "electrodes": np.full((5, 5, 24), 2000), "pdc": np.full((5, 5), 1900),
-                        "tdc": np.zeros((5, 5)), "tac": np.zeros((5, 5)), "valid": np.ones(5, bool)})
+    s.append("biotac", biotac_rows(5))
     s.commit()
     s.close("success")
     return path
