@@ -101,7 +101,7 @@ class AnalysisConfig:
     reference_time_s: float | None = None
     static_flow: str = "auto"                # flow.static: auto (where an estimate reads it) | all
     static_every: int = 4                    # flow.static_every: frames between static-flow computations
-    workers: int | None = None               # flow job threads, figure processes; None: the cores available
+    workers: int | None = None               # flow job threads, figure and first-run compile processes; None: the cores available
     intensity: str = "contact"
     save_fields: bool = False
     figures: bool = True

@@ -26,6 +26,7 @@ import numpy as np
 from cliapp.heap import long_lived_frozen
 from runstore import inflight, labelled, rundir
 from runstore.provenance import git_state
+from tactile import warmup
 
 from . import figures as figs
 from . import results
@@ -129,7 +130,9 @@ def analyze_run(store_path, analysis_cfg=None, *, console=print) -> dict:
 
 
 def _analyse_and_write(store_path: Path, cfg, console) -> dict:
-    run = load_run(store_path, in_memory_frames=cfg.memory.chunk_frames)
+    # a first analysis on this machine compiles the kernels on every core while the run loads
+    with warmup.compiling(cfg.tactile, cfg.workers or available_workers(), console):
+        run = load_run(store_path, in_memory_frames=cfg.memory.chunk_frames)
     model = get_model(cfg.tactile)
     with long_lived_frozen():
         return _analyse(store_path, run, model, cfg, console)

@@ -10,6 +10,7 @@ Modules, in the order the method uses them:
 - :mod:`tactile.aggregate` per-frame and per-window summaries of a flow field
 - :mod:`tactile.pipeline`  the whole chain for a record, with its configuration
 - :mod:`tactile.online`    the same chain one frame at a time, for a live stream
+- :mod:`tactile.warmup`    a first run's numba kernels compiled in child processes, one per core
 
 This package imports nothing else of the project.
 """

@@ -1,0 +1,161 @@
+"""Compile the method's numba kernels on every core before a first analysis needs them.
+
+numba compiles a kernel the first time it is called and keeps it on disk (``__pycache__``
+beside the source, or ``$NUMBA_CACHE_DIR``). So the first analysis on a machine, or the
+first after an upgrade, compiles about half a minute of kernels (2-core machine), one after
+the other, before it can do anything else. The kernels fall into independent groups (the
+geodesics of the model, the renderer, Farnebäck's flow with the aggregation, the Kalman
+smoother). :func:`compiling` compiles each group that is not on disk yet in a child process
+of its own, as many at once as there are cores. Each child calls the real code on a few
+made-up frames. The children write numba's on-disk cache, and the analysis then loads the
+kernels from it.
+
+Only the entry kernels of a group (the ones Python calls) decide whether it is on disk. The
+helpers they call are compiled with them. A group that is already cached costs one
+small file read, and nothing starts when every group is cached or there is one core.
+``tests/test_warmup.py`` checks that after a warm-up the analysis of a run compiles nothing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import os
+import pickle
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+
+__all__ = ["cold_groups", "compile_group", "compiling"]
+
+COST_S = {"model": 20.0, "frames": 18.5, "flow": 13.7, "signals": 4.5}
+"""Time (s) a child takes for each group on this 2-core machine, cache empty (``python -m
+tactile.warmup GROUP``): the longest go first when the groups are shared out among the
+children. ``model`` also computes the geodesic distances of the configured mesh and caches
+them. The four add up to more than the same kernels compiled in one process (~35 s): each
+child starts Python and numba and compiles numba's own helpers again."""
+
+
+def _entries(group: str, config) -> list[tuple[str, str]]:
+    """(module, kernel) the analysis calls from Python for ``group`` under ``config``
+    (a :class:`tactile.pipeline.TactileConfig`); the empty list if it calls none."""
+    from . import farneback
+    if group == "model":
+        return [("tactile._geodesic_kernels", "_accurate_distances")] if config.geodesic == "accurate" else []
+    if group == "frames":
+        return [("tactile._frame_kernels", k) for k in
+                (("_rasterise", "_render_frames") if config.render == "exact" else ("_rasterise", "_store_u8"))]
+    if group == "flow":
+        flow = [("tactile._farneback_kernels", "expand"), ("tactile._farneback_kernels", "flows")] \
+            if farneback.supports(config.size, config.flow) else []
+        return flow + [("tactile.aggregate", "_aggregate")]
+    if group == "signals":
+        return [("tactile.signals", k) for k in ("_gains_kernel", "_filter_kernel", "_smooth_kernel_inplace",
+                                                 "_median_kernel")]
+    raise ValueError(f"warm-up group: expected one of {sorted(COST_S)}, got {group!r}")
+
+
+def _on_disk(module: str, kernel: str) -> bool:
+    """Whether numba's disk cache holds a current compilation of ``module.kernel``. Reads
+    numba's cache index (not a public API): anything unexpected counts as cached, so that
+    a change in numba costs the parallel warm-up, never a wrong result."""
+    try:
+        cache = getattr(importlib.import_module(module), kernel)._cache
+        return bool(cache._cache_file._load_index())
+    except Exception:  # noqa: BLE001 - see the docstring
+        return True
+
+
+def cold_groups(config) -> list[str]:
+    """The groups of kernels ``config`` needs that numba has not compiled on this machine."""
+    return [g for g in COST_S if any(not _on_disk(m, k) for m, k in _entries(g, config))]
+
+
+def compile_group(group: str, config) -> None:
+    """Compile (or load) the kernels of ``group`` by running the real code on a few frames."""
+    from . import aggregate, flow, signals
+    from .pipeline import TactileModel
+    rng = np.random.default_rng(0)
+    h, w = config.size
+    if group == "model":
+        TactileModel.interpolation(config)       # also fills the disk cache of the geodesic distances
+    elif group == "frames":
+        # a coarse mesh with the paper's geodesics: the same kernel types in a second or two
+        import tempfile
+        with tempfile.TemporaryDirectory() as tmp:
+            small = replace(config, geodesic="paper", mesh_spacing=max(config.mesh_spacing, 2.5))
+            model = TactileModel.build(small, cache_dir=tmp)
+        view = next(iter(model.plans))
+        activation = rng.uniform(0.0, 2.0, (4, 24))
+        model.render_uint8(activation, view)
+        model.render(activation, view)
+    elif group == "flow":
+        frames = rng.integers(0, 255, (6, h, w), dtype=np.uint8)
+        mask = np.zeros((h, w), bool)
+        mask[2:-2, 2:-2] = True
+        for fields in (flow.dynamic_flow(frames, config=config.flow),
+                       flow.static_flow(frames, np.zeros((h, w), np.uint8), config=config.flow)):
+            aggregate.aggregate_flow(fields, mask, noise=config.noise)
+    elif group == "signals":
+        counts = rng.normal(0.0, 1.0, (20, 2, 24))
+        signals.kalman_smooth(counts, R=config.kalman_r, Q=config.kalman_q)
+        signals.running_median(counts, 5)
+    else:
+        _entries(group, config)                  # raises the error naming the groups
+
+
+def _share_out(groups: list[str], processes: int) -> list[list[str]]:
+    """Groups into ``processes`` lists of about equal compile time, longest first."""
+    bins: list[list[str]] = [[] for _ in range(min(processes, len(groups)))]
+    for g in sorted(groups, key=COST_S.__getitem__, reverse=True):
+        min(bins, key=lambda b: sum(COST_S[x] for x in b)).append(g)
+    return bins
+
+
+@contextlib.contextmanager
+def compiling(config, workers: int, console=None):
+    """Compile the kernels ``config`` needs that are not on disk yet in up to ``workers``
+    child processes while the ``with`` body runs; wait for them at its end.
+
+    With one worker, or when everything is on disk, nothing starts: the kernels compile on
+    first use, as always. A child that fails costs only time (the kernel then compiles where
+    it is first used); an exception in the body stops the children.
+    """
+    cold = cold_groups(config) if workers > 1 else []
+    if not cold:
+        yield
+        return
+    if console is not None:
+        console(f"analysis: compiling the numba kernels for this machine ({', '.join(cold)}) in "
+                f"{min(workers, len(cold))} processes: once after an install or an upgrade")
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    children = []
+    try:
+        for share in _share_out(cold, workers):
+            child = subprocess.Popen([sys.executable, "-m", "tactile.warmup", *share], stdin=subprocess.PIPE,
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+            children.append(child)
+            with contextlib.suppress(BrokenPipeError):
+                child.stdin.write(pickle.dumps(config))
+                child.stdin.close()
+        yield
+        for child in children:
+            child.wait()
+    finally:
+        for child in children:
+            if child.poll() is None:
+                child.kill()
+                child.wait()
+
+
+def _main(groups: list[str]) -> int:
+    config = pickle.load(sys.stdin.buffer)
+    for group in groups:
+        compile_group(group, config)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_main(sys.argv[1:]))
