@@ -32,7 +32,6 @@ blob's true shift); a fixed ``[low, high]`` maps the same kΩ to the same grey i
 
 from __future__ import annotations
 
-import os
 import time as _time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -102,14 +101,6 @@ def primary_reference(setting: str, baseline_kind: str) -> str:
     if setting != "auto":
         return setting
     return ONSET if baseline_kind == "tare" else UNLOADED
-
-
-def available_workers() -> int:
-    """The cores this process may run on (its CPU affinity, not the machine's count)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:                       # pragma: no cover - macOS, Windows
-        return max(1, os.cpu_count() or 1)
 
 
 def compute(prepared, contacts: dict[str, list[tuple[int, int]]], fingers: list[str], model, margin: int,

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tactile import contact as tcontact
+from tactile import warmup
 
 from . import estimates as est
 from . import flows as fl
@@ -151,7 +152,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
                        intensity=cfg.intensity, load_fraction=s.load_fraction, static_every=cfg.static_every)
     flows, flow_s = fl.compute(prepared, contacts, run.fingers, model, margin, signal, thresholds, s.settle_frames,
                                plan, keep_fields=cfg.save_fields, progress=cfg.progress,
-                               workers=cfg.workers or fl.available_workers())
+                               workers=cfg.workers or warmup.available_cores())
     t_flow = _time.perf_counter()
 
     segments: list[labelling.Segment] = []

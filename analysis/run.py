@@ -32,7 +32,6 @@ from . import figures as figs
 from . import results
 from . import score as scoring
 from .config import as_dict, load_config
-from .flows import available_workers
 from .load import AnalysisInputError, load_run, open_truth
 from .pipeline import analyse, get_model
 
@@ -131,7 +130,7 @@ def analyze_run(store_path, analysis_cfg=None, *, console=print) -> dict:
 
 def _analyse_and_write(store_path: Path, cfg, console) -> dict:
     # a first analysis on this machine compiles the kernels on every core while the run loads
-    with warmup.compiling(cfg.tactile, cfg.workers or available_workers(), console):
+    with warmup.compiling(cfg.tactile, cfg.workers, console):
         run = load_run(store_path, in_memory_frames=cfg.memory.chunk_frames)
     model = get_model(cfg.tactile)
     with long_lived_frozen():
@@ -170,7 +169,7 @@ def _analyse(store_path: Path, run, model, cfg, console) -> dict:
     try:
         staging.mkdir()                          # inside: a signal right after it still removes it
         # with several workers the figures are drawn in forked processes while this one writes
-        with (figs.FigureWriter(a, model, staging / "figures", cfg, cfg.workers or available_workers())
+        with (figs.FigureWriter(a, model, staging / "figures", cfg, cfg.workers or warmup.available_cores())
               if cfg.figures else contextlib.nullcontext()) as drawing:
             tree = results.to_tree(a, list(model.plans), {"analysis_id": analysis_id,
                                                           "provenance": json.loads(results.dumps(provenance))},

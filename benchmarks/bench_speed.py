@@ -1,6 +1,7 @@
 """Speed figures of issue 15 as JSON lines (min and median of several runs, paired ratios).
 
     python benchmarks/bench_speed.py [--repeat 3] [--only analysis,farneback,workers,startup,dryrun,dis] [--keep DIR]
+    python benchmarks/bench_speed.py --only firstrun --repeat 2      # minutes: not in the default set
 
 - ``analysis``: CPU of ``analyze_run`` (one worker, figures on) of the 60 s five-finger store
   of ``bench_analysis.py`` against the bare dynamic Farnebäck calls on the same frames, each
@@ -14,6 +15,10 @@
   serial part, and an Amdahl projection to 4 and 8 workers (figures off).
 - ``startup``: ``tactile-run --help`` and ``tactile-analyze --help`` (wall and CPU of the child).
 - ``dryrun``: the default dry run ``tactile-run progress=false`` (wall and CPU of the child).
+- ``firstrun``: the default dry run on a machine that has compiled nothing (empty numba and
+  geodesic caches), its kernels compiled in child processes (``tactile.warmup``, the default)
+  and in the analysing process alone (``analysis.workers=1``), taking turns; wall, CPU and the
+  paired ratio.
 - ``dis``: each flow method / DIS preset on a simulated straws sweep and pour: flow CPU and the
   scores that the presets move (sweep direction error, pour phase onsets).
 CPU is ``time.process_time`` (every thread of the process); the machine's other load shows in
@@ -144,9 +149,9 @@ def bench_farneback(store: Path, repeat: int) -> None:
 
 
 def bench_workers(store: Path, work: Path, repeat: int) -> None:
-    from analysis.flows import available_workers
+    from tactile.warmup import available_cores
     from analysis.run import analyze_run
-    cores = available_workers()
+    cores = available_cores()
     walls, serial, jobs = {}, {}, {}
     for figures in (False, True):
         for w in sorted({1, *range(2, cores + 1)}):
@@ -220,6 +225,27 @@ def bench_dryrun(work: Path, repeat: int) -> None:
     emit(stats("dry_run_cpu_over_reference", [c / r for (_, c), r in zip(runs, refs)], paired=True))
 
 
+def bench_firstrun(work: Path, repeat: int) -> None:
+    """:func:`bench_dryrun`'s job with empty caches (``NUMBA_CACHE_DIR``, ``TACTILE_CACHE_DIR``
+    of its own), with the warm-up's children and without them (one worker), taking turns."""
+    runs: dict[str, list] = {"children": [], "one_process": []}
+    for i in range(repeat):
+        for kind, extra in (("children", []), ("one_process", ["analysis.workers=1"])):
+            caches = work / f"caches_{kind}{i}"
+            os.environ.update(NUMBA_CACHE_DIR=str(caches / "numba"), TACTILE_CACHE_DIR=str(caches / "tactile"))
+            try:
+                runs[kind].append(_child([str(BIN / "tactile-run"), "progress=false", *extra,
+                                          f"hydra.run.dir={work / f'first_{kind}{i}'}"]))
+            finally:
+                del os.environ["NUMBA_CACHE_DIR"], os.environ["TACTILE_CACHE_DIR"]
+            shutil.rmtree(caches, ignore_errors=True)
+    for kind, values in runs.items():
+        emit(stats(f"first_dry_run_wall_s_{kind}", [w for w, _ in values]))
+        emit(stats(f"first_dry_run_cpu_s_{kind}", [c for _, c in values]))
+    emit(stats("first_dry_run_wall_children_over_one_process",
+               [a[0] / b[0] for a, b in zip(runs["children"], runs["one_process"])], paired=True))
+
+
 def simulated(protocol: str, work: Path) -> Path:
     d = work / f"sim_{protocol}"
     if not (d / "run.zarr").exists():
@@ -271,6 +297,8 @@ def main() -> None:
         bench_dryrun(work, args.repeat)
     if "dis" in parts:
         bench_dis(work)
+    if "firstrun" in parts:
+        bench_firstrun(work, args.repeat)
     if not args.keep:
         shutil.rmtree(work, ignore_errors=True)
 

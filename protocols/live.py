@@ -111,9 +111,9 @@ def open_viewer(name: str | None, fingers, model: TactileModel, run_dir, warn=pr
 
 
 def warm_up(model: TactileModel, views) -> None:
-    """Run the online pipeline on a few made-up frames, so that its compiled kernels (numba
-    compiles on first use: seconds on the first run after an install) are ready before the
-    run starts, not while the first frames queue up."""
+    """Run the online pipeline on a few made-up frames, so that its compiled kernels are
+    loaded before the run starts, not while the first frames queue up. (On a machine's first
+    run :func:`tactile.warmup.compile_cold` has compiled them on every core just before.)"""
     flow = online.OnlineFlow(model, np.full((1, 24), 10.0), ("ff",), views)
     for i in range(3):
         flow.push(i, 0.01 * i, np.full((1, 24), 3000 - 100 * i))

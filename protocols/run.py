@@ -21,6 +21,7 @@ from hardware.errors import ConfigError
 from tactile.frames import DEFAULT_VIEWS
 from tactile.geometry import load_taxels
 from runstore import RunStore, provenance, rundir, utc_now
+from tactile import warmup
 from tactile.pipeline import TactileModel
 
 from .calibration import session_baseline, store_baseline
@@ -62,7 +63,7 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
     run_dir = Path(run_dir)
     check_config(cfg)
     plan = make_plan(cfg)
-    live, model = live_setup(cfg, plan, build=not cfg.plan_only)
+    live, model = live_setup(cfg, plan, build=not cfg.plan_only, console=console)
     if cfg.plan_only:
         check_hardware(cfg)
         console(format_timeline(plan))
@@ -147,11 +148,12 @@ def _close(run_dir: Path, prov: dict, recorder: Recorder, monitor, lab, outcome:
     return Outcome(status, error, outcome.steps_done), stats
 
 
-def live_setup(cfg, plan: Plan, build: bool = True) -> tuple[LiveConfig, TactileModel | None]:
+def live_setup(cfg, plan: Plan, build: bool = True, console=print) -> tuple[LiveConfig, TactileModel | None]:
     """The checked ``live`` settings and, when the run computes live flow (``live.enabled``,
     or auto when a step reacts to slip) and ``build``, the online tactile model (else
-    ``None``). A protocol that reacts to slip with the live monitor turned off is refused
-    here, before anything moves."""
+    ``None``), its kernels compiled (on every core, the first time on a machine). A protocol
+    that reacts to slip with the live monitor turned off is refused here, before anything
+    moves."""
     try:
         live = live_settings(cfg)
     except (ValueError, TypeError) as exc:
@@ -183,6 +185,7 @@ def live_setup(cfg, plan: Plan, build: bool = True) -> tuple[LiveConfig, Tactile
         raise ConfigError("live.views", f"{bad}: expected one or more of {sorted(known)}")
     if not build:
         return live, None
+    warmup.compile_cold(tactile, console=console, groups=warmup.LIVE)
     model = TactileModel.build(tactile)
     warm_up(model, live.views)
     return live, model

@@ -3,10 +3,11 @@
 numba compiles a kernel the first time it is called and keeps it on disk (``__pycache__``
 beside the source, or ``$NUMBA_CACHE_DIR``). So the first analysis on a machine, or the
 first after an upgrade, compiles about half a minute of kernels (2-core machine), one after
-the other, before it can do anything else. The kernels fall into independent groups (the
-geodesics of the model, the renderer, Farnebäck's flow with the aggregation, the Kalman
-smoother). :func:`compiling` compiles each group that is not on disk yet in a child process
-of its own, as many at once as there are cores. Each child calls the real code on a few
+the other, before it can do anything else; a run with the live slip monitor compiles its
+own kernels before the arm moves. The kernels fall into independent groups (the geodesics
+of the model, the renderer, Farnebäck's flow with the aggregation, the Kalman smoother, the
+live chain). :func:`compiling` compiles each group that is not on disk yet in a child
+process, as many at once as there are cores. Each child calls the real code on a few
 made-up frames. The children write numba's on-disk cache, and the analysis then loads the
 kernels from it.
 
@@ -28,18 +29,31 @@ from dataclasses import replace
 
 import numpy as np
 
-__all__ = ["cold_groups", "compile_group", "compiling"]
+__all__ = ["ANALYSIS", "LIVE", "available_cores", "cold_groups", "compile_cold", "compile_group", "compiling"]
 
-COST_S = {"model": 20.0, "frames": 18.5, "flow": 13.7, "signals": 4.5}
+COST_S = {"model": 20.0, "frames": 18.5, "flow": 13.7, "signals": 4.5, "online": 30.4}
 """Time (s) a child takes for each group on this 2-core machine, cache empty (``python -m
 tactile.warmup GROUP``): the longest go first when the groups are shared out among the
 children. ``model`` also computes the geodesic distances of the configured mesh and caches
-them. The four add up to more than the same kernels compiled in one process (~35 s): each
-child starts Python and numba and compiles numba's own helpers again."""
+them. The analysis's four add up to more than the same kernels compiled in one process
+(~35 s): each child starts Python and numba and compiles numba's own helpers again."""
+
+ANALYSIS = ("model", "frames", "flow", "signals")
+"""The groups an offline analysis calls."""
+LIVE = ("model", "online")
+"""The groups the live monitor (:class:`tactile.online.OnlineFlow`) calls."""
+
+
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity, not the machine's count)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:                       # pragma: no cover - macOS, Windows
+        return max(1, os.cpu_count() or 1)
 
 
 def _entries(group: str, config) -> list[tuple[str, str]]:
-    """(module, kernel) the analysis calls from Python for ``group`` under ``config``
+    """(module, kernel) that Python calls for ``group`` under ``config``
     (a :class:`tactile.pipeline.TactileConfig`); the empty list if it calls none."""
     from . import farneback
     if group == "model":
@@ -54,6 +68,9 @@ def _entries(group: str, config) -> list[tuple[str, str]]:
     if group == "signals":
         return [("tactile.signals", k) for k in ("_gains_kernel", "_filter_kernel", "_smooth_kernel_inplace",
                                                  "_median_kernel")]
+    if group == "online":
+        return [("tactile.online", "_filter_step"), ("tactile.online", "_results"),
+                ("tactile._frame_kernels", "_render_activation_u8"), ("tactile._farneback_kernels", "advance")]
     raise ValueError(f"warm-up group: expected one of {sorted(COST_S)}, got {group!r}")
 
 
@@ -68,29 +85,30 @@ def _on_disk(module: str, kernel: str) -> bool:
         return True
 
 
-def cold_groups(config) -> list[str]:
-    """The groups of kernels ``config`` needs that numba has not compiled on this machine."""
-    return [g for g in COST_S if any(not _on_disk(m, k) for m, k in _entries(g, config))]
+def cold_groups(config, groups=ANALYSIS) -> list[str]:
+    """The ``groups`` of kernels ``config`` needs that numba has not compiled on this machine."""
+    return [g for g in groups if any(not _on_disk(m, k) for m, k in _entries(g, config))]
 
 
 def compile_group(group: str, config) -> None:
     """Compile (or load) the kernels of ``group`` by running the real code on a few frames."""
-    from . import aggregate, flow, signals
+    from . import aggregate, flow, online, signals
     from .pipeline import TactileModel
     rng = np.random.default_rng(0)
     h, w = config.size
     if group == "model":
         TactileModel.interpolation(config)       # also fills the disk cache of the geodesic distances
-    elif group == "frames":
-        # a coarse mesh with the paper's geodesics: the same kernel types in a second or two
-        import tempfile
-        with tempfile.TemporaryDirectory() as tmp:
-            small = replace(config, geodesic="paper", mesh_spacing=max(config.mesh_spacing, 2.5))
-            model = TactileModel.build(small, cache_dir=tmp)
+    elif group in ("frames", "online"):
+        model = _coarse_model(config)
         view = next(iter(model.plans))
         activation = rng.uniform(0.0, 2.0, (4, 24))
-        model.render_uint8(activation, view)
-        model.render(activation, view)
+        if group == "frames":
+            model.render_uint8(activation, view)
+            model.render(activation, view)
+        else:                                    # as protocols.live.warm_up: a few frames pushed
+            stream = online.OnlineFlow(model, np.full((1, 24), 10.0), ("ff",), tuple(model.plans))
+            for i in range(3):
+                stream.push(i, 0.01 * i, np.full((1, 24), 3000.0 - 100 * i))
     elif group == "flow":
         frames = rng.integers(0, 255, (6, h, w), dtype=np.uint8)
         mask = np.zeros((h, w), bool)
@@ -106,6 +124,17 @@ def compile_group(group: str, config) -> None:
         _entries(group, config)                  # raises the error naming the groups
 
 
+def _coarse_model(config):
+    """A model of ``config`` on a coarse mesh with the paper's geodesics (built in a second or
+    two, nothing cached): the renderer's kernels see the same types as with the real one."""
+    import tempfile
+
+    from .pipeline import TactileModel
+    with tempfile.TemporaryDirectory() as tmp:
+        small = replace(config, geodesic="paper", mesh_spacing=max(config.mesh_spacing, 2.5))
+        return TactileModel.build(small, cache_dir=tmp)
+
+
 def _share_out(groups: list[str], processes: int) -> list[list[str]]:
     """Groups into ``processes`` lists of about equal compile time, longest first."""
     bins: list[list[str]] = [[] for _ in range(min(processes, len(groups)))]
@@ -115,20 +144,22 @@ def _share_out(groups: list[str], processes: int) -> list[list[str]]:
 
 
 @contextlib.contextmanager
-def compiling(config, workers: int, console=None):
-    """Compile the kernels ``config`` needs that are not on disk yet in up to ``workers``
-    child processes while the ``with`` body runs; wait for them at its end.
+def compiling(config, workers: int | None = None, console=None, groups=ANALYSIS):
+    """Compile the kernels of ``groups`` that ``config`` needs and that are not on disk yet in
+    up to ``workers`` (default: the cores available) child processes while the ``with`` body
+    runs; wait for them at its end.
 
     With one worker, or when everything is on disk, nothing starts: the kernels compile on
     first use, as always. A child that fails costs only time (the kernel then compiles where
     it is first used); an exception in the body stops the children.
     """
-    cold = cold_groups(config) if workers > 1 else []
+    workers = available_cores() if workers is None else workers
+    cold = cold_groups(config, groups) if workers > 1 else []
     if not cold:
         yield
         return
     if console is not None:
-        console(f"analysis: compiling the numba kernels for this machine ({', '.join(cold)}) in "
+        console(f"compiling the numba kernels for this machine ({', '.join(cold)}) in "
                 f"{min(workers, len(cold))} processes: once after an install or an upgrade")
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     children = []
@@ -148,6 +179,12 @@ def compiling(config, workers: int, console=None):
             if child.poll() is None:
                 child.kill()
                 child.wait()
+
+
+def compile_cold(config, workers: int | None = None, console=None, groups=ANALYSIS) -> None:
+    """:func:`compiling` with nothing else to do meanwhile: returns when the children are done."""
+    with compiling(config, workers, console, groups):
+        pass
 
 
 def _main(groups: list[str]) -> int:

@@ -33,6 +33,28 @@ summary = analyze_run(sys.argv[1], {"workers": 2, "figures": False, "progress": 
 print(json.dumps({"segments": len(summary["segments"]), "compiled": sorted(set(compiled))}))
 """
 
+LIVE = """
+import json, sys
+from numba.core import event
+from hydra import compose, initialize_config_dir
+compiled = []
+class Listener(event.Listener):
+    def on_start(self, ev):
+        f = ev.data["dispatcher"].py_func
+        compiled.append(f"{f.__module__}.{f.__qualname__}")
+    def on_end(self, ev):
+        pass
+event.register("numba:compile", Listener())
+from protocols.plan import make_plan
+from protocols.run import live_setup
+from protocols.schema import register
+register()
+with initialize_config_dir(config_dir=sys.argv[1], version_base=None):
+    cfg = compose("config", overrides=["protocol=pour_grasp_reactive"])
+live, model = live_setup(cfg, make_plan(cfg), console=print)
+print(json.dumps({"views": list(model.config.views), "compiled": sorted(set(compiled))}))
+"""
+
 INTERRUPTED = """
 import os, time
 from analysis.config import load_config
@@ -97,6 +119,21 @@ def test_a_first_analysis_compiles_in_children_and_then_nothing_itself(tmp_path)
     assert again.returncode == 0, again.stderr[-2000:]
     assert not any("compiling the numba kernels" in line for line in again.stdout.splitlines())
     assert json.loads(again.stdout.splitlines()[-1])["compiled"] == []
+
+
+@pytest.mark.slow
+def test_a_first_run_with_the_live_monitor_compiles_its_kernels_in_children(tmp_path):
+    """Before a reactive pour moves anything, the live chain's kernels and the model's geodesics
+    are compiled in children; the run's process then only loads them."""
+    conf = Path(__file__).resolve().parents[1] / "conf"
+    out = subprocess.run([sys.executable, "-c", LIVE, str(conf)], env=_fresh_caches(tmp_path), capture_output=True,
+                         text=True, timeout=900)
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.splitlines()
+    assert any("compiling the numba kernels" in line and "(model, online) in 2 processes" in line
+               for line in lines), lines
+    result = json.loads(lines[-1])
+    assert result["views"] and [k for k in result["compiled"] if k.startswith("tactile.")] == []
 
 
 @pytest.mark.slow
