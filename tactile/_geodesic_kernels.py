@@ -183,13 +183,22 @@ def _geodesic_pair(ax, a, b, XA, XB, Y, lengths, mid, y, path_out):
             apart = max(apart, abs(XA[k, i] - XB[k, i]))
     same = apart <= _SAME_PATH * _polyline_length(XA, _N0)
     best = _refine_levels(ax, XA, Y, lengths, mid, y)
-    path_out[:, :] = XA
+    _copy_path(XA, path_out)
     if not same:  # the two starts found different geodesics: keep the shorter
         other = _refine_levels(ax, XB, Y, lengths, mid, y)
         if other < best:
             best = other
-            path_out[:, :] = XB
+            _copy_path(XB, path_out)
     return best
+
+
+@_jit
+def _copy_path(src, dst):
+    """dst[:, :] = src, element by element: an array assignment would compile numba's
+    shape-mismatch error reporting (~8 s of a first run) for two arrays that always match."""
+    for k in range(src.shape[0]):
+        for i in range(3):
+            dst[k, i] = src[k, i]
 
 
 @_jit
@@ -207,5 +216,5 @@ def _accurate_distances(ax, pa, pb, keep_paths):
         for j in range(n):
             out[i, j] = _geodesic_pair(ax, pa[i], pb[j], XA, XB, Y, lengths, mid, y, path)
             if keep_paths:
-                paths[i, j] = path
+                _copy_path(path, paths[i, j])
     return out, paths

@@ -41,7 +41,7 @@ geodesic-ODE shooting: median 7e-9, worst 3e-6 relative, never shorter than the 
 more than 1e-13; over 24 000 pairs the worst is ~1e-5, for ~28 mm near-opposite pairs close
 to the equator (near-conjugate points, where the length is flat in the path's position
 and relaxation converges slowly). Speed: 24 x 4000 pairs in ~7 s on one core, after a
-one-off numba compilation of ~10 s (cached on disk by numba). Memory: a few
+one-off numba compilation of ~9 s (cached on disk by numba). Memory: a few
 (65, 3) buffers, pairs are looped over.
 
 The results are cached on disk by :func:`tactile.disk_cache.cached_geodesic_distances`; change

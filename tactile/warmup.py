@@ -31,7 +31,7 @@ import numpy as np
 
 __all__ = ["ANALYSIS", "LIVE", "available_cores", "cold_groups", "compile_cold", "compile_group", "compiling"]
 
-COST_S = {"model": 20.0, "frames": 18.5, "flow": 13.7, "signals": 4.5, "online": 30.4}
+COST_S = {"model": 13.4, "frames": 18.5, "flow": 13.7, "signals": 4.5, "online": 30.4}
 """Time (s) a child takes for each group on this 2-core machine, cache empty (``python -m
 tactile.warmup GROUP``): the longest go first when the groups are shared out among the
 children. ``model`` also computes the geodesic distances of the configured mesh and caches

@@ -147,8 +147,8 @@ def test_an_error_while_the_children_compile_stops_them(tmp_path):
 
 def test_groups_are_shared_out_longest_first():
     groups = ["signals", "flow", "model", "frames"]
-    assert warmup._share_out(groups, 1) == [["model", "frames", "flow", "signals"]]
-    assert warmup._share_out(groups, 2) == [["model", "signals"], ["frames", "flow"]]
+    assert warmup._share_out(groups, 1) == [["frames", "flow", "model", "signals"]]
+    assert warmup._share_out(groups, 2) == [["frames", "signals"], ["flow", "model"]]
     assert sorted(map(tuple, warmup._share_out(groups, 8))) == [("flow",), ("frames",), ("model",), ("signals",)]
 
 
