@@ -17,10 +17,10 @@ from tactile import warmup
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="reads child processes from /proc")
 
-ANALYSE = """
+LISTEN = """
 import json, sys
 from numba.core import event
-compiled = []
+compiled = []      # every kernel this process compiles (numba reports no load from its cache)
 class Listener(event.Listener):
     def on_start(self, ev):
         f = ev.data["dispatcher"].py_func
@@ -28,23 +28,16 @@ class Listener(event.Listener):
     def on_end(self, ev):
         pass
 event.register("numba:compile", Listener())
+"""
+
+ANALYSE = LISTEN + """
 from analysis.run import analyze_run
 summary = analyze_run(sys.argv[1], {"workers": 2, "figures": False, "progress": False}, console=print)
 print(json.dumps({"segments": len(summary["segments"]), "compiled": sorted(set(compiled))}))
 """
 
-LIVE = """
-import json, sys
-from numba.core import event
+LIVE = LISTEN + """
 from hydra import compose, initialize_config_dir
-compiled = []
-class Listener(event.Listener):
-    def on_start(self, ev):
-        f = ev.data["dispatcher"].py_func
-        compiled.append(f"{f.__module__}.{f.__qualname__}")
-    def on_end(self, ev):
-        pass
-event.register("numba:compile", Listener())
 from protocols.plan import make_plan
 from protocols.run import live_setup
 from protocols.schema import register
