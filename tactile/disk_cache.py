@@ -17,7 +17,7 @@ from ._checks import finite_array
 from .ellipsoid import EllipsoidFit, _check_axes, _check_on_surface, fit_ellipsoid
 from .geodesic import ALGORITHM_VERSION, GEODESIC_METHODS, geodesic_distances
 
-__all__ = ["cached_fit_ellipsoid", "cached_geodesic_distances", "default_cache_dir"]
+__all__ = ["cached_fit_ellipsoid", "cached_geodesic_distances", "default_cache_dir", "geodesic_cache_file"]
 
 FIT_VERSION = "1"
 """Part of the ellipsoid fit's cache key: change it when :func:`fit_ellipsoid` changes its result."""
@@ -76,6 +76,18 @@ def _write_cache(path: Path, values: np.ndarray) -> None:
         raise
 
 
+def geodesic_cache_file(axes, points_a, points_b, *, method: str = "accurate", cache_dir=None, **kw) -> Path:
+    """The file in which :func:`cached_geodesic_distances` keeps these distances (it may not
+    exist yet)."""
+    ax = _check_axes(axes)
+    if method not in GEODESIC_METHODS:
+        raise ValueError(f"method: expected one of {GEODESIC_METHODS}, got {method!r}")
+    pa = _check_on_surface("points_a", ax, points_a)
+    pb = _check_on_surface("points_b", ax, points_b)
+    directory = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    return directory / f"geodesic-{_cache_key(ax, pa, pb, tags=(ALGORITHM_VERSION, method, kw))}.npz"
+
+
 def cached_geodesic_distances(axes, points_a, points_b, *, method: str = "accurate",
                               cache_dir=None, **kw) -> np.ndarray:
     """:func:`geodesic_distances`, computed once and cached on disk.
@@ -86,13 +98,10 @@ def cached_geodesic_distances(axes, points_a, points_b, *, method: str = "accura
     that cannot be read, has the wrong shape or fails the checksum is reported with a
     warning and rebuilt. Writes are atomic (temporary file + ``os.replace``).
     """
+    path = geodesic_cache_file(axes, points_a, points_b, method=method, cache_dir=cache_dir, **kw)
     ax = _check_axes(axes)
-    if method not in GEODESIC_METHODS:
-        raise ValueError(f"method: expected one of {GEODESIC_METHODS}, got {method!r}")
     pa = _check_on_surface("points_a", ax, points_a)
     pb = _check_on_surface("points_b", ax, points_b)
-    directory = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    path = directory / f"geodesic-{_cache_key(ax, pa, pb, tags=(ALGORITHM_VERSION, method, kw))}.npz"
     shape = (len(pa), len(pb))
     if path.exists():
         try:

@@ -93,7 +93,9 @@ class TactileModel:
         """Fit the ellipsoid, mesh it, compute (or load cached) geodesic kernel weights and plans."""
         if config.render not in ("exact", "linear"):
             raise ValueError(f"render: expected 'exact' or 'linear', got {config.render!r}")
-        taxels, fit, mesh, weights = cls.interpolation(config, taxels, cache_dir)
+        taxels, fit, mesh = cls.surface_of(config, taxels, cache_dir)
+        weights = surface.interpolation_weights(mesh, taxels, sigma=config.sigma, kernel=config.kernel,
+                                                geodesic=config.geodesic, cache_dir=cache_dir)
         known = {**frames.DEFAULT_VIEWS, **config.custom_views}
         unknown = [v for v in config.views if v not in known]
         if unknown:
@@ -107,17 +109,14 @@ class TactileModel:
                    operators=operators)
 
     @staticmethod
-    def interpolation(config: TactileConfig = TactileConfig(), taxels=None, cache_dir=None) -> tuple:
-        """The costly half of :meth:`build`: ``(taxels, fit, mesh, weights)``, the ellipsoid fit,
-        its mesh and the (M, 24) geodesic kernel weights (fit and distances cached on disk)."""
+    def surface_of(config: TactileConfig = TactileConfig(), taxels=None, cache_dir=None) -> tuple:
+        """``(taxels, fit, mesh)`` of :meth:`build`: the (24, 3) taxels (default: the BioTac SP's),
+        the ellipsoid fitted to them (cached on disk) and its mesh."""
         taxels = geometry.load_taxels() if taxels is None else finite_array("taxels", taxels, ndim=2, last=3)
         if len(taxels) != 24:
             raise ValueError(f"taxels: expected 24 taxel positions, got {len(taxels)}")
         fit = geometry.cached_fit_ellipsoid(taxels, cache_dir=cache_dir)
-        mesh = surface.build_mesh(fit.centre, fit.axes, spacing=config.mesh_spacing)
-        weights = surface.interpolation_weights(mesh, taxels, sigma=config.sigma, kernel=config.kernel,
-                                                geodesic=config.geodesic, cache_dir=cache_dir)
-        return taxels, fit, mesh, weights
+        return taxels, fit, surface.build_mesh(fit.centre, fit.axes, spacing=config.mesh_spacing)
 
     def smooth(self, activation) -> np.ndarray:
         """Kalman (+ RTS if ``config.smooth``) along axis 0 of (T, ..., 24) activation, kΩ."""

@@ -21,7 +21,7 @@ import numpy as np
 
 from ._checks import finite_array, positive
 from .ellipsoid import ellipsoid_normals, ellipsoid_points, project_to_ellipsoid
-from .disk_cache import cached_geodesic_distances
+from .disk_cache import cached_geodesic_distances, geodesic_cache_file
 
 __all__ = ["KERNEL_FORMS", "SurfaceMesh", "build_mesh", "interpolate", "interpolation_weights",
            "kernel_weights", "tactile_surface"]
@@ -156,10 +156,20 @@ def interpolation_weights(mesh: SurfaceMesh, taxels, sigma: float = 2.0,
     Returns:
         (M, 24) weights, rows summing to 1: ``values = activation @ weights.T``.
     """
-    taxels = finite_array("taxels", taxels, ndim=2, last=3)
-    on_surface = project_to_ellipsoid(mesh.axes, taxels - mesh.centre)
-    d = cached_geodesic_distances(mesh.axes, mesh.local_points, on_surface, method=geodesic, cache_dir=cache_dir)
+    d = cached_geodesic_distances(mesh.axes, mesh.local_points, _on_surface(mesh, taxels), method=geodesic,
+                                  cache_dir=cache_dir)
     return kernel_weights(d, sigma, form=kernel)
+
+
+def weights_on_disk(mesh: SurfaceMesh, taxels, geodesic: str = "accurate", cache_dir=None) -> bool:
+    """Whether :func:`interpolation_weights` finds its geodesic distances on disk."""
+    return geodesic_cache_file(mesh.axes, mesh.local_points, _on_surface(mesh, taxels), method=geodesic,
+                               cache_dir=cache_dir).exists()
+
+
+def _on_surface(mesh: SurfaceMesh, taxels) -> np.ndarray:
+    """(24, 3) taxel positions (mm, sensor frame) projected onto the mesh's ellipsoid, centred."""
+    return project_to_ellipsoid(mesh.axes, finite_array("taxels", taxels, ndim=2, last=3) - mesh.centre)
 
 
 def interpolate(activation, weights) -> np.ndarray:

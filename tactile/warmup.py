@@ -53,11 +53,9 @@ def available_cores() -> int:
 
 
 def _entries(group: str, config) -> list[tuple[str, str]]:
-    """(module, kernel) that Python calls for ``group`` under ``config``
-    (a :class:`tactile.pipeline.TactileConfig`); the empty list if it calls none."""
+    """(module, kernel) that Python calls for ``group`` (not ``model``: see :func:`cold_groups`)
+    under ``config`` (a :class:`tactile.pipeline.TactileConfig`); the empty list if it calls none."""
     from . import farneback
-    if group == "model":
-        return [("tactile._geodesic_kernels", "_accurate_distances")] if config.geodesic == "accurate" else []
     if group == "frames":
         return [("tactile._frame_kernels", k) for k in
                 (("_rasterise", "_render_frames") if config.render == "exact" else ("_rasterise", "_store_u8"))]
@@ -86,18 +84,38 @@ def _on_disk(module: str, kernel: str) -> bool:
 
 
 def cold_groups(config, groups=ANALYSIS) -> list[str]:
-    """The ``groups`` of kernels ``config`` needs that numba has not compiled on this machine."""
-    return [g for g in groups if any(not _on_disk(m, k) for m, k in _entries(g, config))]
+    """The ``groups`` of kernels ``config`` needs that numba has not compiled on this machine
+    (for ``model``: whose geodesic distances are not on disk; with them there, the geodesic
+    kernel is never called)."""
+    def cold(group):
+        if group == "model":
+            return not _model_on_disk(config)
+        return any(not _on_disk(m, k) for m, k in _entries(group, config))
+    return [g for g in groups if cold(g)]
+
+
+def _model_on_disk(config) -> bool:
+    """Whether the model's geodesic distances are in the disk cache (or it needs none)."""
+    from . import surface
+    from .pipeline import TactileModel
+    if config.geodesic != "accurate":
+        return True
+    try:
+        taxels, _, mesh = TactileModel.surface_of(config)
+        return surface.weights_on_disk(mesh, taxels, config.geodesic)
+    except Exception:  # noqa: BLE001 - the model's own build reports what is wrong
+        return True
 
 
 def compile_group(group: str, config) -> None:
     """Compile (or load) the kernels of ``group`` by running the real code on a few frames."""
-    from . import aggregate, flow, online, signals
+    from . import aggregate, flow, online, signals, surface
     from .pipeline import TactileModel
     rng = np.random.default_rng(0)
     h, w = config.size
-    if group == "model":
-        TactileModel.interpolation(config)       # also fills the disk cache of the geodesic distances
+    if group == "model":                        # the geodesic distances, computed and cached on disk
+        taxels, _, mesh = TactileModel.surface_of(config)
+        surface.interpolation_weights(mesh, taxels, geodesic=config.geodesic)
     elif group in ("frames", "online"):
         model = _coarse_model(config)
         view = next(iter(model.plans))
@@ -121,7 +139,7 @@ def compile_group(group: str, config) -> None:
         signals.kalman_smooth(counts, R=config.kalman_r, Q=config.kalman_q)
         signals.running_median(counts, 5)
     else:
-        _entries(group, config)                  # raises the error naming the groups
+        raise ValueError(f"warm-up group: expected one of {sorted(COST_S)}, got {group!r}")
 
 
 def _coarse_model(config):
@@ -159,8 +177,9 @@ def compiling(config, workers: int | None = None, console=None, groups=ANALYSIS)
         yield
         return
     if console is not None:
-        console(f"compiling the numba kernels for this machine ({', '.join(cold)}) in "
-                f"{min(workers, len(cold))} processes: once after an install or an upgrade")
+        n = min(workers, len(cold))
+        console(f"compiling the numba kernels for this machine ({', '.join(cold)}) in {n} "
+                f"process{'es' if n > 1 else ''}: once after an install or an upgrade")
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     children = []
     try:

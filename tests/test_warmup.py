@@ -153,3 +153,13 @@ def test_a_warm_machine_has_nothing_to_compile(model):
     process_view(model, activation, "bottom", references={"unloaded": None})
     warmup.compile_group("signals", model.config)
     assert warmup.cold_groups(model.config) == []
+
+
+def test_the_model_is_cold_only_while_its_geodesic_distances_are_not_on_disk(model, cache_dir, tmp_path,
+                                                                            monkeypatch):
+    """Distances on disk are all the model needs: its geodesic kernel may never have been
+    compiled on this machine (a fresh clone with the user's cache), and nothing starts."""
+    monkeypatch.setenv("TACTILE_CACHE_DIR", str(cache_dir))        # where the session's model cached them
+    assert warmup.cold_groups(model.config, ("model",)) == []
+    monkeypatch.setenv("TACTILE_CACHE_DIR", str(tmp_path))
+    assert warmup.cold_groups(model.config, ("model",)) == ["model"]
