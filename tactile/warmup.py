@@ -25,6 +25,7 @@ import os
 import pickle
 import subprocess
 import sys
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -37,6 +38,10 @@ tactile.warmup GROUP``): the longest go first when the groups are shared out amo
 children. ``model`` also computes the geodesic distances of the configured mesh and caches
 them. The analysis's four add up to more than the same kernels compiled in one process
 (~35 s): each child starts Python and numba and compiles numba's own helpers again."""
+
+WAIT_S = 600.0
+"""Longest wait (s) for the children: one still compiling then is stopped, and whatever it had
+not cached compiles where it is first used."""
 
 ANALYSIS = ("model", "frames", "flow", "signals")
 """The groups an offline analysis calls."""
@@ -169,7 +174,8 @@ def compiling(config, workers: int | None = None, console=None, groups=ANALYSIS)
 
     With one worker, or when everything is on disk, nothing starts: the kernels compile on
     first use, as always. A child that fails costs only time (the kernel then compiles where
-    it is first used); an exception in the body stops the children.
+    it is first used), and so does one still compiling after :data:`WAIT_S`; an exception in
+    the body stops the children.
     """
     workers = available_cores() if workers is None else workers
     cold = cold_groups(config, groups) if workers > 1 else []
@@ -191,8 +197,10 @@ def compiling(config, workers: int | None = None, console=None, groups=ANALYSIS)
                 child.stdin.write(pickle.dumps(config))
                 child.stdin.close()
         yield
+        deadline = time.monotonic() + WAIT_S
         for child in children:
-            child.wait()
+            with contextlib.suppress(subprocess.TimeoutExpired):     # then killed below
+                child.wait(max(0.0, deadline - time.monotonic()))
     finally:
         for child in children:
             if child.poll() is None:
