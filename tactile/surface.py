@@ -24,7 +24,7 @@ from .ellipsoid import ellipsoid_normals, ellipsoid_points, project_to_ellipsoid
 from .disk_cache import cached_geodesic_distances, geodesic_cache_file
 
 __all__ = ["KERNEL_FORMS", "SurfaceMesh", "build_mesh", "interpolate", "interpolation_weights",
-           "kernel_weights", "tactile_surface"]
+           "kernel_weights", "tactile_surface", "weights_on_disk"]
 
 KERNEL_FORMS = ("paper", "squared")
 
