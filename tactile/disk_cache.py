@@ -79,11 +79,18 @@ def _write_cache(path: Path, values: np.ndarray) -> None:
 def geodesic_cache_file(axes, points_a, points_b, *, method: str = "accurate", cache_dir=None, **kw) -> Path:
     """The file in which :func:`cached_geodesic_distances` keeps these distances (it may not
     exist yet)."""
+    return _geodesic_file(*_checked(axes, points_a, points_b, method), method, cache_dir, kw)
+
+
+def _checked(axes, points_a, points_b, method: str) -> tuple:
+    """(axes, points_a, points_b) checked as :func:`geodesic_distances` checks them."""
     ax = _check_axes(axes)
     if method not in GEODESIC_METHODS:
         raise ValueError(f"method: expected one of {GEODESIC_METHODS}, got {method!r}")
-    pa = _check_on_surface("points_a", ax, points_a)
-    pb = _check_on_surface("points_b", ax, points_b)
+    return ax, _check_on_surface("points_a", ax, points_a), _check_on_surface("points_b", ax, points_b)
+
+
+def _geodesic_file(ax, pa, pb, method: str, cache_dir, kw: dict) -> Path:
     directory = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     return directory / f"geodesic-{_cache_key(ax, pa, pb, tags=(ALGORITHM_VERSION, method, kw))}.npz"
 
@@ -98,10 +105,8 @@ def cached_geodesic_distances(axes, points_a, points_b, *, method: str = "accura
     that cannot be read, has the wrong shape or fails the checksum is reported with a
     warning and rebuilt. Writes are atomic (temporary file + ``os.replace``).
     """
-    path = geodesic_cache_file(axes, points_a, points_b, method=method, cache_dir=cache_dir, **kw)
-    ax = _check_axes(axes)
-    pa = _check_on_surface("points_a", ax, points_a)
-    pb = _check_on_surface("points_b", ax, points_b)
+    ax, pa, pb = _checked(axes, points_a, points_b, method)
+    path = _geodesic_file(ax, pa, pb, method, cache_dir, kw)
     shape = (len(pa), len(pb))
     if path.exists():
         try:

@@ -74,7 +74,7 @@ def _entries(group: str, config) -> list[tuple[str, str]]:
     if group == "online":
         return [("tactile.online", "_filter_step"), ("tactile.online", "_results"),
                 ("tactile._frame_kernels", "_render_activation_u8"), ("tactile._farneback_kernels", "advance")]
-    raise ValueError(f"warm-up group: expected one of {sorted(COST_S)}, got {group!r}")
+    _unknown(group)
 
 
 def _on_disk(module: str, kernel: str) -> bool:
@@ -144,7 +144,11 @@ def compile_group(group: str, config) -> None:
         signals.kalman_smooth(counts, R=config.kalman_r, Q=config.kalman_q)
         signals.running_median(counts, 5)
     else:
-        raise ValueError(f"warm-up group: expected one of {sorted(COST_S)}, got {group!r}")
+        _unknown(group)
+
+
+def _unknown(group: str):
+    raise ValueError(f"warm-up group: expected one of {sorted(COST_S)}, got {group!r}")
 
 
 def _coarse_model(config):
