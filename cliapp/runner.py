@@ -5,6 +5,10 @@ turns what Hydra or the guard refuses into one line and exit status 2, and a str
 SIGTERM into one line and exit status 3. A Ctrl-C whose ``KeyboardInterrupt`` Python drops
 because it was raised in a finaliser (a weakref callback, ``__del__``: "Exception ignored",
 a traceback, and the program goes on) is delivered again (:func:`redeliver_dropped_interrupt`).
+Once a signal has been received, any other error a finaliser drops (an object the
+interrupt left half-built, such as a ``zipfile.ZipFile`` cut inside its ``__init__``) goes
+to the log at debug level, not to the console: the one line that says what was
+interrupted stays the only one.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ from __future__ import annotations
 import _thread
 import atexit
 import gc
+import logging
 import os
 import re
 import signal
@@ -25,6 +30,7 @@ from validation import suggest, unknown_key
 from .config_guard import install
 
 BAD_INPUT, INTERRUPTED = ExitCode.BAD_INPUT, ExitCode.INTERRUPTED
+_signals = {"received": 0}      # SIGINT and SIGTERM received by this process (note_signal)
 
 
 def run_app(app, argv=None, step_fields=None) -> None:
@@ -37,29 +43,36 @@ def run_app(app, argv=None, step_fields=None) -> None:
     a misspelt step key (``cliapp`` stands below ``protocols`` and cannot ask it)."""
     argv = sys.argv[1:] if argv is None else argv
     os.environ["HYDRA_FULL_ERROR"] = "1"         # Hydra raises instead of printing several lines
-    if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
-        signal.signal(signal.SIGTERM, signal.default_int_handler)
+    _signals["received"] = 0
+    for s, default in ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, signal.SIG_DFL)):
+        if signal.getsignal(s) == default:          # left alone: SIGINT ignored (started in the background)
+            signal.signal(s, _interrupt)
     hook_before, sys.unraisablehook = sys.unraisablehook, _unraisable(sys.unraisablehook)
+    code = None         # exit once the exception is gone: the objects its traceback held are freed under our hook
     try:
         install(argv)
         app()
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
-        sys.exit(INTERRUPTED)
+        code = INTERRUPTED
     except Exception as exc:
         if "verbose=true" in argv:
             traceback.print_exception(exc)
         print(f"error: {error_line(exc, step_fields)}", file=sys.stderr)
-        sys.exit(BAD_INPUT)
+        code = BAD_INPUT
     finally:
         for s in (signal.SIGINT, signal.SIGTERM):   # the app is done: a late signal must not turn
             signal.signal(s, signal.SIG_IGN)        # its exit status into a kill (at interpreter exit)
+        if _signals["received"]:
+            gc.collect()                            # what an interrupt left in reference cycles, under our hook
         sys.unraisablehook = hook_before
         # At interpreter exit, after the other atexit handlers (logging's flush...), everything
         # left is frozen: the collections of the exit then skip it (0.3-0.8 s of a dry run's
         # exit otherwise). At exit only: a caller that goes on (a test) keeps its collector.
         atexit.unregister(gc.freeze)
         atexit.register(gc.freeze)
+    if code is not None:
+        sys.exit(code)
 
 
 def redeliver_dropped_interrupt(unraisable) -> bool:
@@ -79,9 +92,26 @@ def redeliver_dropped_interrupt(unraisable) -> bool:
     return True
 
 
+def note_signal() -> None:
+    """Count a SIGINT or SIGTERM (for a handler installed in place of :func:`run_app`'s)."""
+    _signals["received"] += 1
+
+
+def _interrupt(signum, frame) -> None:
+    note_signal()
+    raise KeyboardInterrupt
+
+
 def _unraisable(before):
     def hook(unraisable):
-        if not redeliver_dropped_interrupt(unraisable):
+        if redeliver_dropped_interrupt(unraisable):
+            return
+        if _signals["received"]:
+            logging.getLogger(__name__).debug(
+                "after an interrupt, a finaliser dropped %s: %s (%r)", unraisable.exc_type.__name__,
+                unraisable.exc_value, unraisable.object,
+                exc_info=(unraisable.exc_type, unraisable.exc_value, unraisable.exc_traceback))
+        else:
             before(unraisable)
     return hook
 

@@ -36,7 +36,7 @@ import sys
 import threading
 from contextlib import contextmanager
 
-from cliapp.runner import redeliver_dropped_interrupt
+from cliapp.runner import note_signal, redeliver_dropped_interrupt
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 RAISING = ("setup", "analysis")
@@ -112,6 +112,7 @@ class Interrupts:
     def handle(self, signum=signal.SIGINT, frame=None) -> None:
         """The signal handler (also callable directly, as a test of the phase logic)."""
         self.count += 1
+        note_signal()
         name = "SIGTERM" if signum == signal.SIGTERM else "Ctrl-C"
         if self.phase == "motion":
             self.motion_signals += 1
