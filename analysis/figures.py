@@ -27,8 +27,11 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
+import signal
 import sys
+import threading
 from collections.abc import Callable
+from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
 
@@ -511,8 +514,9 @@ class FigureWriter:
     one worker or where the platform cannot fork. The files are the same bytes either way.
 
     Use as a context manager: leaving it normally waits for every figure; leaving it on an
-    error or an interrupt cancels the pool and ends its workers (SIGTERM) before returning, so
-    ``out_dir`` can be removed safely and no worker outlives the analysis."""
+    error or an interrupt cancels the pool and ends its workers (SIGKILL) before returning, so
+    ``out_dir`` can be removed safely and no worker outlives the analysis. So does an interrupt
+    while the workers are being started (else the exit would wait for them forever)."""
 
     def __init__(self, a, model, out_dir: Path, cfg, workers: int = 1):
         self.out_dir = Path(out_dir)
@@ -529,9 +533,15 @@ class FigureWriter:
             _JOBS[:] = self.jobs
             for stream in (sys.stdout, sys.stderr):
                 stream.flush()                   # else a worker would flush this process's buffered output too
-            self.pool = ProcessPoolExecutor(workers, multiprocessing.get_context("fork"), _worker_init,
-                                            (os.getpid(),))
-            self.futures = [self.pool.submit(_draw_job, i, self.out_dir) for i in range(len(self.jobs))]
+            self._others = set(multiprocessing.active_children())
+            try:
+                with _signals_deferred():
+                    self.pool = ProcessPoolExecutor(workers, multiprocessing.get_context("fork"), _worker_init,
+                                                    (os.getpid(),))
+                    self.futures = [self.pool.submit(_draw_job, i, self.out_dir) for i in range(len(self.jobs))]
+            except BaseException:                # Ctrl-C as the workers started: there is no __exit__
+                self._stop_workers()
+                raise
 
     def result(self) -> tuple[list[str], list[str]]:
         """The file names written (in order) and the flow labels the cap left out; raises what a
@@ -567,13 +577,38 @@ class FigureWriter:
     def _stop_workers(self) -> None:
         """Cancel what is queued and end the workers now (their figures are not wanted: the
         caller removes ``out_dir``), then wait for them to be gone. A second Ctrl-C landing in
-        a pool's orderly shutdown could leave a worker waiting and the process hanging at exit."""
-        workers = list((getattr(self.pool, "_processes", None) or {}).values())   # shutdown forgets them
-        self.pool.shutdown(wait=False, cancel_futures=True)
+        a pool's orderly shutdown could leave a worker waiting and the process hanging at exit.
+        The workers are the children started since the pool was made: one an interrupt caught
+        between its start and the pool's bookkeeping counts too. SIGKILL, not SIGTERM: a worker
+        forked a moment ago may not have set its handlers yet (it would print a traceback)."""
+        workers = [p for p in multiprocessing.active_children() if p not in self._others]
+        if self.pool is not None:
+            self.pool.shutdown(wait=False, cancel_futures=True)
         for process in workers:
-            process.terminate()
+            process.kill()
         for process in workers:
             process.join()
+
+
+@contextmanager
+def _signals_deferred():
+    """SIGINT and SIGTERM noted during the block and delivered to their handlers after it (on
+    the main thread; elsewhere nothing changes). Around the workers' start: a worker forked
+    with the app's handlers would raise ``KeyboardInterrupt`` (and print a traceback) for a
+    Ctrl-C at the terminal that lands before :func:`_worker_init` ignores it; with these, it
+    is noted and dropped there, and acted on here once every worker is known."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    noted = []
+    before = {s: signal.signal(s, lambda signum, _: noted.append(signum)) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, handler)
+        for s in dict.fromkeys(noted):
+            signal.raise_signal(s)
 
 
 def _worker_init(parent: int) -> None:

@@ -121,6 +121,59 @@ def test_an_analysis_killed_while_its_figure_workers_draw_leaves_no_worker(store
             os.kill(c, signal.SIGKILL)
 
 
+def test_a_ctrl_c_as_the_figure_workers_start_leaves_no_worker_for_the_exit_to_wait_on(recorded, tmp_path,
+                                                                                        monkeypatch):
+    """Seen in CI: Ctrl-C landed while the pool was being started, inside ``FigureWriter()``
+    (so no ``__exit__`` stopped it); the workers waited for work and the process's exit waited
+    for them, forever, with Ctrl-C ignored by then. The interrupt lands after the first
+    figure is queued (all workers forked): the workers are gone when it propagates."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from analysis import figures
+    from analysis.config import load_config
+    from analysis.load import load_run
+    from analysis.pipeline import analyse, get_model
+
+    cfg = load_config({"progress": False})
+    model = get_model(cfg.tactile)
+    a = analyse(load_run(recorded), cfg, model)
+    submit, calls = ProcessPoolExecutor.submit, []
+
+    def interrupted(self, *args):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return submit(self, *args)
+    monkeypatch.setattr(ProcessPoolExecutor, "submit", interrupted)
+    before = set(multiprocessing.active_children())
+    with pytest.raises(KeyboardInterrupt):
+        figures.FigureWriter(a, model, tmp_path / "figures", cfg, workers=2)
+    assert set(multiprocessing.active_children()) == before
+
+
+def test_a_signal_while_the_figure_workers_fork_waits_for_them_and_never_reaches_them():
+    """Around the workers' start SIGINT is noted, then raised once they are all known; a
+    worker forked meanwhile inherits the noting handler, so a Ctrl-C at the terminal before it
+    ignores SIGINT itself is dropped there, not a ``KeyboardInterrupt`` and a traceback."""
+    from analysis.figures import _signals_deferred
+
+    with pytest.raises(KeyboardInterrupt):
+        with _signals_deferred():
+            pid = os.fork()
+            if pid == 0:                       # the worker, before its own handlers
+                code = 1
+                try:
+                    signal.raise_signal(signal.SIGINT)
+                    code = 0
+                finally:
+                    os._exit(code)             # never back into pytest in a forked copy
+            signal.raise_signal(signal.SIGINT)  # noted only
+            assert os.waitpid(pid, 0)[1] == 0
+            noted = True
+    assert noted
+
+
 def test_an_analysis_stopped_between_its_renames_is_incomplete_never_stale(store, monkeypatch):
     """The previous analysis's ``summary.json`` never stands beside another analysis's outputs:
     it goes first, the new one comes last (the renames are interrupted after the first)."""
