@@ -28,6 +28,7 @@ from runstore.status import ExitCode
 from validation import suggest, unknown_key
 
 from .config_guard import install
+from .startup import end_at_once
 
 BAD_INPUT, INTERRUPTED = ExitCode.BAD_INPUT, ExitCode.INTERRUPTED
 _signals = {"received": 0}      # SIGINT and SIGTERM received by this process (note_signal)
@@ -45,7 +46,7 @@ def run_app(app, argv=None, step_fields=None) -> None:
     os.environ["HYDRA_FULL_ERROR"] = "1"         # Hydra raises instead of printing several lines
     _signals["received"] = 0
     for s, default in ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, signal.SIG_DFL)):
-        if signal.getsignal(s) == default:          # left alone: SIGINT ignored (started in the background)
+        if signal.getsignal(s) in (default, end_at_once):   # left alone: SIGINT ignored (in the background)
             signal.signal(s, _interrupt)
     hook_before, sys.unraisablehook = sys.unraisablehook, _unraisable(sys.unraisablehook)
     code = None         # exit once the exception is gone: the objects its traceback held are freed under our hook

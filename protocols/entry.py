@@ -7,11 +7,13 @@ import sys
 from pathlib import Path
 
 from cliapp.quick_help import help_text, print_and_exit, wants_help
+from cliapp.startup import end_at_once_on_signals
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 
 
 def main() -> None:
+    end_at_once_on_signals()
     argv = sys.argv[1:]
     if wants_help(argv):
         print_and_exit(help_text(CONF_DIR, "config"))

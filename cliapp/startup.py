@@ -1,0 +1,31 @@
+"""Ctrl-C (or SIGTERM) while a command is still starting: it ends there, with one line.
+
+Importing Hydra, numpy, numba and zarr takes most of a second, and a ``KeyboardInterrupt``
+raised inside a library's import can leave it half-initialised and surface as another error
+with a traceback (seen: omegaconf's ``'…' object has no attribute '_invalidate_flags_cache'``,
+exit 1). Nothing has been written while a command starts, so the entry points call
+:func:`end_at_once_on_signals` first: a signal then prints ``interrupted`` and exits 3 on the
+spot. :func:`cliapp.runner.run_app` (and a run's :class:`protocols.interrupts.Interrupts`)
+take the signals over once the app can act on them.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+
+INTERRUPTED = 3      # runstore.status.ExitCode.INTERRUPTED, not imported: this module stays light
+
+
+def end_at_once(signum, frame) -> None:
+    """The handler while a command starts: one line, exit status 3, no cleanup (nothing to clean)."""
+    os.write(2, b"interrupted\n")
+    os._exit(INTERRUPTED)
+
+
+def end_at_once_on_signals() -> None:
+    """Handle SIGINT and SIGTERM with :func:`end_at_once` (a signal ignored, as SIGINT in a
+    program started in the background, stays ignored)."""
+    for s in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(s) != signal.SIG_IGN:
+            signal.signal(s, end_at_once)
