@@ -24,18 +24,14 @@ from functools import lru_cache
 
 import numpy as np
 
+from ._lazy import lazy_import
+
 __all__ = ["Expansions", "Stream", "expand", "pair_flows", "supports"]
 
 _MIN_PYRAMID = 32
 """OpenCV builds a pyramid level only where the scaled frame is at least this many pixels."""
 
-
-def _kernels():
-    """The numba kernels, loaded (compiled on a first run) at first use. A plain import, not
-    ``tactile._lazy``: the flow jobs' threads may ask at the same moment, and an import waits
-    for another thread's; a lazy module would show them a half-initialised one."""
-    from . import _farneback_kernels
-    return _farneback_kernels
+_k = lazy_import("tactile._farneback_kernels")   # numba: compiled on first use
 
 
 def supports(shape, config) -> bool:
@@ -135,7 +131,7 @@ def expand(frames, config) -> Expansions:
     n = int(config.poly_n)
     g, xg, xxg, ig11, ig03, ig33, ig55 = _applicability(n, float(config.poly_sigma))
     values = np.empty(frames.shape + (5,), np.float32)
-    _kernels().expand(frames, values, n, g, xg, xxg, ig11, ig03, ig33, ig55)
+    _k.expand(frames, values, n, g, xg, xxg, ig11, ig03, ig33, ig55)
     return Expansions(values, ~frames.reshape(len(frames), -1).any(axis=1))
 
 
@@ -150,7 +146,7 @@ def pair_flows(first: Expansions, second: Expansions, pairs, config, out=None) -
     todo = np.where(both_empty[:, None], -1, pairs)
     if out is None:
         out = np.empty((len(pairs),) + first.values.shape[1:3] + (2,), np.float32)
-    _kernels().flows(first.values, second.values, todo, out, int(config.winsize), int(config.iterations))
+    _k.flows(first.values, second.values, todo, out, int(config.winsize), int(config.iterations))
     return out
 
 
@@ -169,7 +165,7 @@ class Stream:
                          np.empty((w + 2 * (winsize // 2 + 1)) * 5, np.float64))
         self._no_field = np.empty((h, w, 2), np.float32)
         self._slot = 0
-        self._advance = _kernels().advance
+        self._advance = _k.advance
 
     def push(self, frame: np.ndarray, field: np.ndarray | None = None) -> None:
         """Take ``frame`` (H, W) uint8; if ``field`` ((H, W, 2) float32, C-contiguous) is given,
