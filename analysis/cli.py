@@ -34,6 +34,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 
 import cliapp.jobresults as jobresults
+from cliapp.runner import signal_received
 
 from .config import AnalysisConfigError
 from .load import AnalysisInputError
@@ -103,17 +104,22 @@ def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
             row["result"] = f"error: {exc}"
             code = max(code, BAD_INPUT)
         except Exception as exc:  # noqa: BLE001 - one line per failed run, keep going
+            if signal_received():  # a Ctrl-C cut a library's code short and its cleanup raised this
+                return _interrupted(store, rows)
             _report(exc, f"analysis of {store} failed", verbose)
             row["result"] = f"failed: {type(exc).__name__}: {exc}"
             code = max(code, FAILED)
         except KeyboardInterrupt:  # Ctrl-C or SIGTERM: stop here; the analysis leaves no partial files
-            print(f"analysis of {store} interrupted; analyse it again with tactile-analyze run={store}",
-                  file=sys.stderr)
-            row["result"] = "interrupted"
-            return INTERRUPTED, rows
+            return _interrupted(store, rows)
     if table and len(stores) > 1:
         write_table(table_dir(spec), rows)
     return code, rows
+
+
+def _interrupted(store: Path, rows: list[dict]) -> tuple[int, list[dict]]:
+    print(f"analysis of {store} interrupted; analyse it again with tactile-analyze run={store}", file=sys.stderr)
+    rows[-1]["result"] = "interrupted"
+    return INTERRUPTED, rows
 
 
 def _report(exc: Exception, what: str, verbose: bool) -> None:

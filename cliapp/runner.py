@@ -39,7 +39,8 @@ def run_app(app, argv=None, step_fields=None) -> None:
     unknown key, bad YAML, a protocol setting ``hydra.*``...) is one line on stderr naming
     it and exit status 2; ``verbose=true`` on the command line adds the traceback. SIGTERM
     is Ctrl-C (the apps' jobs own both while they write); one outside a job ends the
-    process with one line and exit status 3; once the app is done, both are ignored.
+    process with one line and exit status 3, and so does any error escaping the app after
+    one (the interrupt cut a library's code short); once the app is done, both are ignored.
     ``step_fields(kind)``: the parameters of a step kind (or None), for the "did you mean" of
     a misspelt step key (``cliapp`` stands below ``protocols`` and cannot ask it)."""
     argv = sys.argv[1:] if argv is None else argv
@@ -59,8 +60,15 @@ def run_app(app, argv=None, step_fields=None) -> None:
     except Exception as exc:
         if "verbose=true" in argv:
             traceback.print_exception(exc)
-        print(f"error: {error_line(exc, step_fields)}", file=sys.stderr)
-        code = BAD_INPUT
+        if signal_received():
+            # the interrupt cut a library's code and its cleanup raised something else
+            # (seen: omegaconf's "'NoneType' object has no attribute '_invalidate_flags_cache'"
+            # for a Ctrl-C while Hydra composed the config): the operator's stop, all the same
+            print("interrupted", file=sys.stderr)
+            code = INTERRUPTED
+        else:
+            print(f"error: {error_line(exc, step_fields)}", file=sys.stderr)
+            code = BAD_INPUT
     finally:
         for s in (signal.SIGINT, signal.SIGTERM):   # the app is done: a late signal must not turn
             signal.signal(s, signal.SIG_IGN)        # its exit status into a kill (at interpreter exit)
@@ -91,6 +99,11 @@ def redeliver_dropped_interrupt(unraisable) -> bool:
     later.daemon = True
     later.start()
     return True
+
+
+def signal_received() -> bool:
+    """Whether a SIGINT or SIGTERM has come since :func:`run_app` started."""
+    return _signals["received"] > 0
 
 
 def note_signal() -> None:

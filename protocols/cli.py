@@ -107,15 +107,16 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
         try:
             with interrupts.during("analysis"):
                 hand_off(result, cfg.analysis, console=console)
-        except KeyboardInterrupt:
+        except (Exception, KeyboardInterrupt) as exc:
+            if isinstance(exc, Exception) and not interrupts.count:     # the recording is safe: say what went wrong
+                _report(cfg, exc, "analysis failed")
+                console(f"run {run_dir}: {result.status}{detail}, recorded; analysis failed ({type(exc).__name__}); "
+                        f"analyse it again with `tactile-analyze run={result.store}`")
+                return code or EXIT_CODES["failed"]
+            # Ctrl-C, or an error after one (it cut a library's code short and the cleanup raised)
             console(f"run {run_dir}: {result.status}{detail}; analysis interrupted (none of it written); "
                     f"analyse it with `tactile-analyze run={result.store}`")
             return EXIT_CODES["aborted"]
-        except Exception as exc:                    # the recording is safe; say what went wrong
-            _report(cfg, exc, "analysis failed")
-            console(f"run {run_dir}: {result.status}{detail}, recorded; analysis failed ({type(exc).__name__}); "
-                    f"analyse it again with `tactile-analyze run={result.store}`")
-            return code or EXIT_CODES["failed"]
     console(f"run {run_dir}: {result.status}{detail}")
     return code
 

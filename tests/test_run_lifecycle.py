@@ -245,6 +245,36 @@ def test_an_object_a_signal_left_half_built_adds_nothing_to_the_one_line(sig):
         assert proc.returncode == 0 and "AttributeError" in proc.stderr, proc.stderr
 
 
+CLEANUP_RAISES = """
+import os, signal, sys, time
+from cliapp.runner import run_app
+
+def app():                              # as omegaconf while Hydra composes a config
+    try:
+        if int(sys.argv[1]):
+            os.kill(os.getpid(), int(sys.argv[1]))
+            time.sleep(5)
+    finally:
+        raise AttributeError("'NoneType' object has no attribute '_invalidate_flags_cache'")
+
+run_app(app, argv=[])
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, 0])
+def test_an_error_a_signal_turned_into_is_still_the_interrupt(sig):
+    """Seen by a probe sending Ctrl-C to ``tactile-analyze`` while Hydra composed its config:
+    omegaconf's cleanup, cut short, raised an ``AttributeError`` in place of the interrupt,
+    and the command said ``error: 'NoneType' object has no attribute …`` with exit 2. After a
+    signal, an error escaping the app is the interrupt; without one, it is an error."""
+    proc = subprocess.run([sys.executable, "-c", CLEANUP_RAISES, str(int(sig))], cwd=ROOT,
+                          capture_output=True, text=True, timeout=60)
+    if sig:
+        assert (proc.returncode, proc.stderr) == (3, "interrupted\n"), proc.stderr
+    else:
+        assert proc.returncode == 2 and proc.stderr.startswith("error: 'NoneType' object"), proc.stderr
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_during_the_analysis_drops_the_analysis_and_keeps_the_run(tmp_path, sig):
