@@ -317,6 +317,39 @@ def test_tactile_analyze_interrupted_says_so_and_leaves_nothing_partial(recorded
     assert not list(recorded.parent.glob(".analysis-*")) and not (recorded.parent / "summary.json").exists()
 
 
+@pytest.mark.slow
+def test_ctrl_c_at_any_moment_of_tactile_analyze_is_the_interrupt_or_a_whole_analysis(recorded, tmp_path):
+    """The net under items 22-24 (a probe sending Ctrl-C at moments spread over
+    ``tactile-analyze``'s life found each; their own tests pin them). The analysis of a copy
+    of the run is timed once, then other copies are interrupted at 8 moments spread over that
+    time: each ends as the interrupt (one line, exit 3, the run directory as it was) or, if
+    the signal came late, as a whole analysis."""
+    def analyse(at=None):
+        run = tmp_path / f"run-{at}"
+        shutil.copytree(recorded.parent, run)
+        before = sorted(p.name for p in run.iterdir())
+        t0 = time.monotonic()
+        proc = subprocess.Popen([sys.executable, "-c", "from analysis.entry import main; main()",
+                                 f"run={run / 'run.zarr'}", "analysis.progress=false"],
+                                cwd=run, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        if at is not None:
+            time.sleep(at)
+            proc.send_signal(signal.SIGINT)
+        err = proc.communicate(timeout=120)[1]
+        return proc.returncode, err, before, sorted(p.name for p in run.iterdir()), time.monotonic() - t0
+
+    code, err, before, after, took = analyse()
+    assert code == 0 and "summary.json" in after, err
+    for i in range(8):
+        at = round(took * (i + 0.5) / 8, 3)
+        code, err, before, after, _ = analyse(at)
+        if code == 0:
+            assert "summary.json" in after and not [n for n in after if n.startswith(".analysis-")], (at, after)
+        else:
+            assert code == 3 and len(err.strip().splitlines()) == 1 and "interrupted" in err, (at, code, err)
+            assert after == before, (at, after)
+
+
 # ----------------------------------------------------------------------------- item 11: arm link lost
 @pytest.mark.slow
 def test_a_lost_arm_link_fails_the_run_with_its_cause_after_the_safe_stop(tmp_path):
