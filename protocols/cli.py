@@ -102,7 +102,7 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
     if cfg.analyze and interrupts.count and result.status != "failed":
         console(f"run {run_dir}: {result.status}{detail}; not analysed (stopped by the operator): "
                 f"`tactile-analyze run={result.store}`")
-        return code
+        return EXIT_CODES["aborted"]               # interrupted, as a Ctrl-C a moment later in the analysis
     if cfg.analyze and result.status in ("success", "aborted"):
         try:
             with interrupts.during("analysis"):

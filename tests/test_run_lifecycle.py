@@ -290,6 +290,22 @@ def test_a_signal_during_the_analysis_drops_the_analysis_and_keeps_the_run(tmp_p
     assert not list((tmp_path / "run").glob(".analysis-*"))
 
 
+@pytest.mark.slow
+def test_a_signal_as_a_finished_run_closes_its_store_skips_the_analysis_and_says_interrupted(tmp_path):
+    """Found by a probe sending Ctrl-C to ``tactile-run`` at moments spread over its life: one
+    that landed while the store closed (the motion done) kept a whole ``success`` run and
+    skipped the analysis, as it should, but the exit status was 0, as if the analysis had run;
+    a moment later, in the analysis, it was 3."""
+    proc = start(tmp_path)
+    wait_for(lambda: (tmp_path / "run" / "run.zarr" / "truth").exists() or proc.poll() is not None, step=0.002)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 3 and "Traceback" not in err, (out, err)
+    assert "success; not analysed (stopped by the operator)" in out, out
+    store_opens_closed(tmp_path / "run" / "run.zarr", "success")
+    assert not (tmp_path / "run" / "summary.json").exists()
+
+
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     root = tmp_path_factory.mktemp("recorded")
