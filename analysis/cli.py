@@ -34,7 +34,7 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 
 import cliapp.jobresults as jobresults
-from cliapp.runner import signal_received
+from cliapp.runner import signals_received
 
 from .config import AnalysisConfigError
 from .load import AnalysisInputError
@@ -104,7 +104,7 @@ def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
             row["result"] = f"error: {exc}"
             code = max(code, BAD_INPUT)
         except Exception as exc:  # noqa: BLE001 - one line per failed run, keep going
-            if signal_received():  # a Ctrl-C cut a library's code short and its cleanup raised this
+            if signals_received():  # a Ctrl-C cut a library's code short and its cleanup raised this
                 return _interrupted(store, rows)
             _report(exc, f"analysis of {store} failed", verbose)
             row["result"] = f"failed: {type(exc).__name__}: {exc}"

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from cliapp.heap import long_lived_frozen
+from cliapp.runner import signals_received
 from runstore import inflight, labelled, rundir
 from runstore.provenance import git_state
 from tactile import warmup
@@ -129,15 +130,16 @@ def analyze_run(store_path, analysis_cfg=None, *, console=print) -> dict:
 
 
 def _analyse_and_write(store_path: Path, cfg, console) -> dict:
+    signals_before = signals_received()          # one more by the end: a library swallowed its interrupt
     # a first analysis on this machine compiles the kernels on every core while the run loads
     with warmup.compiling(cfg.tactile, cfg.workers, console):
         run = load_run(store_path, in_memory_frames=cfg.memory.chunk_frames)
     model = get_model(cfg.tactile)
     with long_lived_frozen():
-        return _analyse(store_path, run, model, cfg, console)
+        return _analyse(store_path, run, model, cfg, console, signals_before)
 
 
-def _analyse(store_path: Path, run, model, cfg, console) -> dict:
+def _analyse(store_path: Path, run, model, cfg, console, signals_before: int) -> dict:
     a = analyse(run, cfg, model)
     run_dir = store_path.parent
     analysis_id = uuid.uuid4().hex
@@ -185,6 +187,8 @@ def _analyse(store_path: Path, run, model, cfg, console) -> dict:
                                                       f"{cfg.max_segment_figures}"}
         text = results.dumps(summary)
         (staging / "summary.json").write_text(text)
+        if signals_received() > signals_before:
+            raise KeyboardInterrupt              # a library swallowed it (OpenCV's loader has a bare except)
         previous = _previous_record(run_dir)
         results.swap_in(staging, run_dir, previous)
     except BaseException:

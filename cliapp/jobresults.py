@@ -32,7 +32,7 @@ from omegaconf import OmegaConf
 
 from runstore.status import ExitCode
 
-from .runner import error_line, run_app, signal_received
+from .runner import error_line, run_app, signals_received
 
 RESULT_FILE = "job_result.json"
 _process = {"code": 0}                  # a single run's exit code; at the end of a sweep, the sweep's
@@ -118,7 +118,7 @@ def run(app, **run_app_kwargs) -> int:
             config = _open_sweep.get("config")
             if config is None:
                 raise                                      # before any job: run_app's one line
-            interrupted = isinstance(exc, KeyboardInterrupt) or signal_received()
+            interrupted = isinstance(exc, KeyboardInterrupt) or signals_received()
             print("interrupted" if interrupted else f"error: the sweep stopped: {error_line(exc)}",
                   file=sys.stderr)
             from hydra._internal.callbacks import Callbacks

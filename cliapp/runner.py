@@ -60,7 +60,7 @@ def run_app(app, argv=None, step_fields=None) -> None:
     except Exception as exc:
         if "verbose=true" in argv:
             traceback.print_exception(exc)
-        if signal_received():
+        if signals_received():
             # the interrupt cut a library's code and its cleanup raised something else
             # (seen: omegaconf's "'NoneType' object has no attribute '_invalidate_flags_cache'"
             # for a Ctrl-C while Hydra composed the config): the operator's stop, all the same
@@ -101,9 +101,9 @@ def redeliver_dropped_interrupt(unraisable) -> bool:
     return True
 
 
-def signal_received() -> bool:
-    """Whether a SIGINT or SIGTERM has come since :func:`run_app` started."""
-    return _signals["received"] > 0
+def signals_received() -> int:
+    """How many SIGINT and SIGTERM have come since :func:`run_app` started."""
+    return _signals["received"]
 
 
 def note_signal() -> None:
