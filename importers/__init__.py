@@ -15,12 +15,23 @@ checksums), :mod:`.writer` (run store + run.json, streamed; staging and atomic r
 :mod:`.importer` (the whole import), :mod:`.cli` (``tactile-import``). See ``docs/import.md``.
 """
 
-from .baseline import Baseline, estimate_baseline, load_calibration
-from .bag import BagFile, read_bag
-from .csv import CsvFile, read_csv
-from .importer import ImportResult, ImportSettings, import_source
-from .recording import ImportInputError, Recording, select_fingers, unconnected_fingers
+from __future__ import annotations
 
-__all__ = ["BagFile", "Baseline", "CsvFile", "ImportInputError", "ImportResult", "ImportSettings", "Recording",
-           "estimate_baseline", "import_source", "load_calibration", "read_bag", "read_csv", "select_fingers",
-           "unconnected_fingers"]
+import importlib
+
+_HOMES = {"Baseline": "baseline", "estimate_baseline": "baseline", "load_calibration": "baseline",
+          "BagFile": "bag", "read_bag": "bag", "CsvFile": "csv", "read_csv": "csv",
+          "ImportResult": "importer", "ImportSettings": "importer", "import_source": "importer",
+          "ImportInputError": "recording", "Recording": "recording", "select_fingers": "recording",
+          "unconnected_fingers": "recording"}
+__all__ = sorted(_HOMES)
+
+
+def __getattr__(name: str):
+    """The names above, imported on first use (numpy, numba and zarr come with them), so that
+    the ``tactile-import`` entry (:mod:`.entry`) can take Ctrl-C before they load."""
+    if name not in _HOMES:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{_HOMES[name]}", __name__), name)
+    globals()[name] = value
+    return value
