@@ -16,13 +16,16 @@ so the run opens and analyses like any other. Groups and arrays that no commit p
 ``running`` is left alone (``run.json`` is written if it is missing). A run that is still
 recording (its process holds the run directory's lock, :mod:`.rundir`) is refused.
 Exit status: 0 recovered (or nothing to do), 2 not a run store or still recording, 1 the
-recovery could not be written (a full disk; nothing is lost).
+recovery could not be written (a full disk; nothing is lost), 3 interrupted (run it again).
 """
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +36,7 @@ from hardware.errors import brief
 from . import rundir
 from .provenance import write_run_json
 from .jsonvalues import utc_now
-from .status import RunStatus
+from .status import ExitCode, RunStatus
 from .writer import remove_debris
 
 
@@ -148,7 +151,8 @@ EPILOG = """examples:
   tactile-recover outputs/*/*/run.zarr                                 # stores: closed ones are left alone
 
 exit status: 0 recovered (or nothing to do), 2 not a run store or still recording (one line),
-1 the recovery could not be written (a full disk; nothing is lost)."""
+1 the recovery could not be written (a full disk; nothing is lost), 3 interrupted (Ctrl-C or
+SIGTERM; run it again to finish)."""
 
 
 def describe(result: dict) -> str:
@@ -171,23 +175,53 @@ def main(argv=None) -> int:
     parser.add_argument("paths", nargs="+", help="run.zarr directories (or run directories holding one)")
     args = parser.parse_args(argv)
     code = 0
-    for p in args.paths:
-        p = Path(p)
-        store = p / "run.zarr" if (p / "run.zarr").exists() else p
-        try:
-            result = recover(store)
-        except ValueError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            code = max(code, 2)
-            continue
-        except OSError as exc:                  # a full disk, a read-only mount: nothing is lost
-            print(f"error: {store}: the recovery could not be written ({type(exc).__name__}: {exc}); "
-                  f"nothing was lost: run tactile-recover again once it can write", file=sys.stderr)
-            code = max(code, 1)
-            continue
-        print(describe(result))
+    with _sigterm_as_ctrl_c():
+        for p in args.paths:
+            p = Path(p)
+            store = p / "run.zarr" if (p / "run.zarr").exists() else p
+            try:
+                result = recover(store)
+            except KeyboardInterrupt:           # every step can be done again: the next run finishes it
+                print(f"interrupted: {store} is as it was or recovered; run tactile-recover on it again",
+                      file=sys.stderr)
+                return int(ExitCode.INTERRUPTED)
+            except ValueError as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                code = max(code, 2)
+                continue
+            except OSError as exc:              # a full disk, a read-only mount: nothing is lost
+                print(f"error: {store}: the recovery could not be written ({type(exc).__name__}: {exc}); "
+                      f"nothing was lost: run tactile-recover again once it can write", file=sys.stderr)
+                code = max(code, 1)
+                continue
+            print(describe(result))
     return code
 
 
+@contextmanager
+def _sigterm_as_ctrl_c():
+    """SIGTERM raises ``KeyboardInterrupt`` in the block, as Ctrl-C does (main thread only)."""
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
+        yield
+        return
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+    before = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, before)
+
+
+def command() -> None:
+    """``tactile-recover``: :func:`main`, then its exit status; a signal once the work is done
+    (the interpreter's exit joins zarr's threads) is ignored, not a late ``KeyboardInterrupt``."""
+    code = main()
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, signal.SIG_IGN)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    command()

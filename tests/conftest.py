@@ -39,7 +39,8 @@ SLOW_TESTS = ("tests/test_geometry.py::test_accurate_geodesic_matches_principal_
               "tests/test_viewer.py::test_bad_input_is_one_line_and_exit_2",
               "tests/test_viewer.py::test_the_core_packages_never_import_rerun",
               "tests/test_architecture.py::test_importing_a_package_loads_nothing_above_it",
-              "tests/test_architecture.py::test_a_run_and_its_analysis_load_neither_scipy_signal_nor_spatial")
+              "tests/test_architecture.py::test_a_run_and_its_analysis_load_neither_scipy_signal_nor_spatial",
+              "tests/test_recover.py::test_a_recovery_interrupted_at_any_step")
 
 
 def pytest_configure(config):
