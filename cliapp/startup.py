@@ -29,3 +29,12 @@ def end_at_once_on_signals() -> None:
     for s in (signal.SIGINT, signal.SIGTERM):
         if signal.getsignal(s) != signal.SIG_IGN:
             signal.signal(s, end_at_once)
+
+
+def tactile_recover() -> None:
+    """The ``tactile-recover`` entry point (here: its module, in ``runstore``, stands below
+    ``cliapp`` and may not import this one): signals end it at once until it has loaded
+    numpy and zarr and takes them over."""
+    end_at_once_on_signals()
+    from runstore.recover import command
+    command()

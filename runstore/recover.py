@@ -175,7 +175,7 @@ def main(argv=None) -> int:
     parser.add_argument("paths", nargs="+", help="run.zarr directories (or run directories holding one)")
     args = parser.parse_args(argv)
     code = 0
-    with _sigterm_as_ctrl_c():
+    with _signals_as_ctrl_c():
         for p in args.paths:
             p = Path(p)
             store = p / "run.zarr" if (p / "run.zarr").exists() else p
@@ -199,19 +199,22 @@ def main(argv=None) -> int:
 
 
 @contextmanager
-def _sigterm_as_ctrl_c():
-    """SIGTERM raises ``KeyboardInterrupt`` in the block, as Ctrl-C does (main thread only)."""
-    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
+def _signals_as_ctrl_c():
+    """SIGINT and SIGTERM raise ``KeyboardInterrupt`` in the block (main thread only; a
+    signal ignored, as SIGINT in a program started in the background, stays ignored)."""
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def interrupt(signum, frame):
         raise KeyboardInterrupt
-    before = signal.signal(signal.SIGTERM, interrupt)
+    before = {s: signal.signal(s, interrupt) for s in (signal.SIGINT, signal.SIGTERM)
+              if signal.getsignal(s) != signal.SIG_IGN}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, before)
+        for s, handler in before.items():
+            signal.signal(s, handler)
 
 
 def command() -> None:

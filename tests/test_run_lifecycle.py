@@ -213,7 +213,9 @@ run_app(app, argv=[])
 
 
 COMMAND_ARGS = {"protocols.entry": ["progress=false"], "analysis.entry": ["run=run/run.zarr"],
-                "importers.entry": [f"source={ROOT / 'tests' / 'data' / 'biotac_rest_untouched.bag'}", "out=imported"]}
+                "importers.entry": [f"source={ROOT / 'tests' / 'data' / 'biotac_rest_untouched.bag'}", "out=imported"],
+                "cliapp.startup": ["run/run.zarr"]}
+ENTRY_FUNCTION = {"cliapp.startup": "tactile_recover"}               # the others: main
 
 
 @pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="reads /proc (Linux)")
@@ -222,11 +224,12 @@ COMMAND_ARGS = {"protocols.entry": ["progress=false"], "analysis.entry": ["run=r
 def test_a_signal_while_a_command_imports_its_libraries_ends_it_with_one_line(tmp_path, entry, sig):
     """Found by sending Ctrl-C to ``tactile-analyze`` at moments spread over its life: at
     0.17 s, inside Hydra's import, omegaconf turned the ``KeyboardInterrupt`` into an
-    ``AttributeError`` traceback and exit 1 (``tactile-import``: a ``KeyboardInterrupt``
-    traceback). The signal is sent once numpy's extension is mapped (the heavy imports are
+    ``AttributeError`` traceback and exit 1 (``tactile-import``, ``tactile-recover``: a
+    ``KeyboardInterrupt`` traceback). The signal is sent once numpy's extension is mapped (the heavy imports are
     under way): one line, exit 3, nothing written."""
-    proc = subprocess.Popen([sys.executable, "-c", f"from {entry} import main; main()", "hydra.run.dir=run",
-                             *COMMAND_ARGS[entry]],
+    function = ENTRY_FUNCTION.get(entry, "main")
+    proc = subprocess.Popen([sys.executable, "-c", f"from {entry} import {function}; {function}()",
+                             *(["hydra.run.dir=run"] if function == "main" else []), *COMMAND_ARGS[entry]],
                             cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     maps = Path(f"/proc/{proc.pid}/maps")
     wait_for(lambda: proc.poll() is not None or "_multiarray_umath" in maps.read_text(), step=0.001)
