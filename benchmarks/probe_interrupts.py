@@ -9,7 +9,7 @@ Each try runs the command in a fresh directory (``{dir}`` in its arguments; a co
 line: the exit status, the last line of stderr, and the problems found. A problem is an exit
 status other than 0 (done) or 3 (interrupted), a traceback or an "Exception ignored" in its
 output, or a ``.analysis-*`` staging directory left behind. The last line sums them up. This
-is how the holes in ``docs/reliability.md`` items 22–27 were found.
+is how the holes in ``docs/reliability.md`` items 22–25 and 27 were found.
 """
 
 from __future__ import annotations
