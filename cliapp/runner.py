@@ -54,16 +54,13 @@ def run_app(app, argv=None, step_fields=None) -> None:
     try:
         install(argv)
         app()
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        code = INTERRUPTED
-    except Exception as exc:
-        if "verbose=true" in argv:
+    except (Exception, KeyboardInterrupt) as exc:
+        if isinstance(exc, Exception) and "verbose=true" in argv:
             traceback.print_exception(exc)
-        if signals_received():
-            # the interrupt cut a library's code and its cleanup raised something else
-            # (seen: omegaconf's "'NoneType' object has no attribute '_invalidate_flags_cache'"
-            # for a Ctrl-C while Hydra composed the config): the operator's stop, all the same
+        # after a signal, an error is the interrupt too: it cut a library's code short and the
+        # cleanup raised something else (seen: omegaconf's "'NoneType' object has no attribute
+        # '_invalidate_flags_cache'" for a Ctrl-C while Hydra composed the config)
+        if isinstance(exc, KeyboardInterrupt) or signals_received():
             print("interrupted", file=sys.stderr)
             code = INTERRUPTED
         else:
@@ -72,7 +69,7 @@ def run_app(app, argv=None, step_fields=None) -> None:
     finally:
         for s in (signal.SIGINT, signal.SIGTERM):   # the app is done: a late signal must not turn
             signal.signal(s, signal.SIG_IGN)        # its exit status into a kill (at interpreter exit)
-        if _signals["received"]:
+        if signals_received():
             gc.collect()                            # what an interrupt left in reference cycles, under our hook
         sys.unraisablehook = hook_before
         # At interpreter exit, after the other atexit handlers (logging's flush...), everything
@@ -120,7 +117,7 @@ def _unraisable(before):
     def hook(unraisable):
         if redeliver_dropped_interrupt(unraisable):
             return
-        if _signals["received"]:
+        if signals_received():
             logging.getLogger(__name__).debug(
                 "after an interrupt, a finaliser dropped %s: %s (%r)", unraisable.exc_type.__name__,
                 unraisable.exc_value, unraisable.object,
