@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from tactile import signals
+from tactile_flow.tactile import signals
 
 from .electrodes import COUNT_RANGE
 
@@ -167,6 +167,6 @@ def finger_activation(activation, k: int):
 def centre_of_pressure(activation, k: int, a: int, b: int, taxels, frames: int = 20_000) -> np.ndarray:
     """(b−a, 3) centre of pressure (mm, NaN where nothing is pressed) of finger ``k`` over frames
     [a, b), ``frames`` at a time (:func:`tactile.aggregate.centre_of_pressure`)."""
-    from tactile.aggregate import centre_of_pressure as cop
+    from tactile_flow.tactile.aggregate import centre_of_pressure as cop
     parts = [cop(activation[s:min(s + frames, b), k], taxels)[0] for s in range(a, b, frames)]
     return np.concatenate(parts) if parts else np.zeros((0, 3))

@@ -33,8 +33,8 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.types import RunMode
 
-import cliapp.jobresults as jobresults
-from cliapp.runner import signals_received
+import tactile_flow.cliapp.jobresults as jobresults
+from tactile_flow.cliapp.runner import signals_received
 
 from .config import AnalysisConfigError
 from .load import AnalysisInputError

@@ -12,9 +12,9 @@ import json
 from dataclasses import dataclass, field
 from typing import Any
 
-from tactile import flow as tflow
-from tactile.pipeline import TactileConfig
-from validation import ConfigError, build, spec, unknown_key
+from tactile_flow.tactile import flow as tflow
+from tactile_flow.tactile.pipeline import TactileConfig
+from tactile_flow.validation import ConfigError, build, spec, unknown_key
 
 
 class AnalysisConfigError(ConfigError):

@@ -6,8 +6,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cliapp.quick_help import help_text, print_and_exit, wants_help
-from cliapp.startup import end_at_once_on_signals
+from tactile_flow.cliapp.quick_help import help_text, print_and_exit, wants_help
+from tactile_flow.cliapp.startup import end_at_once_on_signals
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 

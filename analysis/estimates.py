@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hardware.transforms import rotvec_to_matrix
+from tactile_flow.hardware.transforms import rotvec_to_matrix
 
 from . import segments as seg
 

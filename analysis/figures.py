@@ -37,8 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile import flow as tflow
-from tactile import surface
+from tactile_flow.tactile import flow as tflow
+from tactile_flow.tactile import surface
 
 from . import flows as fl
 

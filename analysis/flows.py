@@ -38,9 +38,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tactile import aggregate as tagg
-from tactile import flow as tflow
-from tactile.pipeline import UNLOADED, ViewResult, process_view
+from tactile_flow.tactile import aggregate as tagg
+from tactile_flow.tactile import flow as tflow
+from tactile_flow.tactile.pipeline import UNLOADED, ViewResult, process_view
 
 ONSET, TIME = "contact_onset", "time"
 MIN_PEAK_KOHM = 0.1

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runstore.reader import data_arrays, open_group
+from tactile_flow.runstore.reader import data_arrays, open_group
 
 from .electrodes import StoredElectrodes, screen_counts
 

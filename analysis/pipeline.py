@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tactile import contact as tcontact
-from tactile import warmup
+from tactile_flow.tactile import contact as tcontact
+from tactile_flow.tactile import warmup
 
 from . import estimates as est
 from . import flows as fl
@@ -30,7 +30,7 @@ EDGE_REACH_S = 0.2
 
 def get_model(tactile_config):
     """The :class:`tactile.pipeline.TactileModel` for a config, built once per process."""
-    from tactile.pipeline import TactileModel
+    from tactile_flow.tactile.pipeline import TactileModel
     key = repr(tactile_config)
     if key not in _MODELS:
         _MODELS[key] = TactileModel.build(tactile_config)

@@ -45,8 +45,8 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from tactile import contact as tcontact
-from tactile import signals
+from tactile_flow.tactile import contact as tcontact
+from tactile_flow.tactile import signals
 
 from .chunking import ImpedanceReader, LazyActivation, smoother_reach, stretches
 from .electrodes import COUNT_RANGE, READ_FRAMES

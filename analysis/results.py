@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runstore.labelled import Dataset, Tree, Variable
+from tactile_flow.runstore.labelled import Dataset, Tree, Variable
 
 from .pipeline import AGG_FIELDS, Analysis
 

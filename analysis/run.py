@@ -23,11 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cliapp.heap import long_lived_frozen
-from cliapp.runner import signals_received
-from runstore import inflight, labelled, rundir
-from runstore.provenance import git_state
-from tactile import warmup
+from tactile_flow.cliapp.heap import long_lived_frozen
+from tactile_flow.cliapp.runner import signals_received
+from tactile_flow.runstore import inflight, labelled, rundir
+from tactile_flow.runstore.provenance import git_state
+from tactile_flow.tactile import warmup
 
 from . import figures as figs
 from . import results

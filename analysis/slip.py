@@ -59,8 +59,8 @@ import math
 
 import numpy as np
 
-from tactile import aggregate as tagg
-from tactile.pipeline import UNLOADED
+from tactile_flow.tactile import aggregate as tagg
+from tactile_flow.tactile.pipeline import UNLOADED
 
 from . import flows as fl
 

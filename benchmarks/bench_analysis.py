@@ -67,9 +67,9 @@ def main() -> None:
     ap.add_argument("--figures", action="store_true")
     ap.add_argument("--keep")
     args = ap.parse_args()
-    from analysis.config import load_config
-    from analysis.pipeline import get_model
-    from analysis.run import analyze_run
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.pipeline import get_model
+    from tactile_flow.analysis.run import analyze_run
     work = Path(args.keep or tempfile.mkdtemp(prefix="bench-analysis-"))
     work.mkdir(parents=True, exist_ok=True)
     store = make_store(work)

@@ -58,7 +58,7 @@ def write_bag(path: Path, messages: int, n_pac: int = 22, seed: int = 0) -> Path
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    from importers.bag import BIOTAC_MSGS, MSGTYPE, TOPIC
+    from tactile_flow.importers.bag import BIOTAC_MSGS, MSGTYPE, TOPIC
 
     ts = get_typestore(Stores.ROS1_NOETIC)
     types = {}
@@ -95,7 +95,7 @@ def write_bag(path: Path, messages: int, n_pac: int = 22, seed: int = 0) -> Path
 
 def import_once(source: Path, out: Path) -> dict:
     """Run ``tactile-import source=... out=...`` in a fresh process; wall s and its peak RSS (MB)."""
-    cmd = [sys.executable, "-m", "importers.cli", f"source={source}", f"out={out}"]
+    cmd = [sys.executable, "-m", "tactile_flow.importers.cli", f"source={source}", f"out={out}"]
     log = out.with_name(out.name + ".log")
     with open(log, "w+") as f:                   # a file, not a pipe: wait4 before reading cannot block
         t = time.perf_counter()

@@ -29,8 +29,8 @@ import tempfile
 import time
 from pathlib import Path
 
-ANALYZE = "from analysis.cli import main; main()"
-RUN = "from protocols.cli import main; main()"
+ANALYZE = "from tactile_flow.analysis.cli import main; main()"
+RUN = "from tactile_flow.protocols.cli import main; main()"
 
 
 def record(work: Path, runs: int, kind: str) -> Path:

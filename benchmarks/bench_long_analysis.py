@@ -49,10 +49,10 @@ def stage_memory(store: Path) -> dict:
     ``preprocess.prepare`` and ``pipeline.analyse`` each hold after and peak at."""
     import tracemalloc
 
-    from analysis.config import load_config
-    from analysis.load import load_run
-    from analysis.pipeline import analyse, get_model
-    from analysis.preprocess import prepare
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.load import load_run
+    from tactile_flow.analysis.pipeline import analyse, get_model
+    from tactile_flow.analysis.preprocess import prepare
     cfg = load_config({"progress": False})
     model = get_model(cfg.tactile)
     out = {}

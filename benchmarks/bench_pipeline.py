@@ -31,8 +31,8 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from tactile import aggregate, frames, geometry, synthetic  # noqa: E402
-from tactile.pipeline import TactileConfig, TactileModel  # noqa: E402
+from tactile_flow.tactile import aggregate, frames, geometry, synthetic  # noqa: E402
+from tactile_flow.tactile.pipeline import TactileConfig, TactileModel  # noqa: E402
 
 cv2.setNumThreads(1)
 RATE = 100.0

@@ -25,13 +25,13 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from hardware.sim import make_sim_lab  # noqa: E402
-from hardware.sim.scenarios import pad_height_pose  # noqa: E402
-from protocols.recorder import Recorder  # noqa: E402
+from tactile_flow.hardware.sim import make_sim_lab  # noqa: E402
+from tactile_flow.hardware.sim.scenarios import pad_height_pose  # noqa: E402
+from tactile_flow.protocols.recorder import Recorder  # noqa: E402
 try:
-    from runstore import RunStore  # noqa: E402
+    from tactile_flow.runstore import RunStore  # noqa: E402
 except ImportError:                 # a checkout before the runstore package (for a before/after figure)
-    from protocols.store import RunStore  # noqa: E402
+    from tactile_flow.protocols.store import RunStore  # noqa: E402
 
 
 def process_cpu() -> float:

@@ -20,8 +20,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from hardware.sim import make_sim_lab  # noqa: E402
-from hardware.sim.scenarios import pad_height_pose, record  # noqa: E402
+from tactile_flow.hardware.sim import make_sim_lab  # noqa: E402
+from tactile_flow.hardware.sim.scenarios import pad_height_pose, record  # noqa: E402
 
 
 def sweep_for(sim_s: float, seed: int = 0) -> dict:

@@ -88,7 +88,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from tactile.slip import CAUSES, SlipConfig, SlipDetector  # noqa: E402
+from tactile_flow.tactile.slip import CAUSES, SlipConfig, SlipDetector  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF_DIR = ROOT / "conf"
@@ -166,7 +166,7 @@ def compose(*overrides):
     from hydra import compose as hcompose
     from hydra import initialize_config_dir
 
-    from protocols.schema import register
+    from tactile_flow.protocols.schema import register
     register()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base=None):
         return hcompose("config", overrides=list(overrides))
@@ -176,7 +176,7 @@ def run(cfg):
     """Run ``cfg`` in a temporary directory; returns (status, error, open tree, tmpdir)."""
     import xarray as xr
 
-    from protocols.run import run_protocol
+    from tactile_flow.protocols.run import run_protocol
     tmp = tempfile.TemporaryDirectory(prefix="bench_slip_")
     result = run_protocol(cfg, Path(tmp.name) / "run", console=lambda *a: None)
     tree = xr.open_datatree(result.store, engine="zarr") if result.store and result.store.exists() else None
@@ -250,7 +250,7 @@ def _live_arrays(live, sel):
 
 
 def _probe_live(live, sel, cfg, count_from=-np.inf) -> Probe:
-    from protocols.live import live_settings
+    from tactile_flow.protocols.live import live_settings
     return probe_stream(*_live_arrays(live, sel), live_settings(cfg).slip, still=True, count_from=count_from)
 
 
@@ -268,10 +268,10 @@ def grip_cfg(seconds: float, seed: int, flexion: float):
 def rest_job(kind: str, seed: int, grip_seconds: float = 60.0, flexion: float = 1.1) -> dict:
     """A slip-free simulated run: gated counts from the live group, margins, and (sweeps)
     the ungated replay."""
-    from protocols.live import live_settings, replay
-    from protocols.plan import make_plan
-    from protocols.run import live_setup
-    from tactile import signals
+    from tactile_flow.protocols.live import live_settings, replay
+    from tactile_flow.protocols.plan import make_plan
+    from tactile_flow.protocols.run import live_setup
+    from tactile_flow.tactile import signals
 
     t_wall = time.perf_counter()
     if kind == "steady_grip":
@@ -336,12 +336,12 @@ def rest_job(kind: str, seed: int, grip_seconds: float = 60.0, flexion: float = 
 
 # ----------------------------------------------------------------------------- the bag
 def rest_bag() -> dict:
-    from importers.bag import read_bag
-    from importers.recording import select_fingers
-    from protocols.live import replay, tactile_config
-    from tactile import signals
-    from tactile.online import OnlineFlow
-    from tactile.pipeline import TactileModel
+    from tactile_flow.importers.bag import read_bag
+    from tactile_flow.importers.recording import select_fingers
+    from tactile_flow.protocols.live import replay, tactile_config
+    from tactile_flow.tactile import signals
+    from tactile_flow.tactile.online import OnlineFlow
+    from tactile_flow.tactile.pipeline import TactileModel
 
     rec, _ = select_fingers(read_bag(BAG))
     fingers = list(rec.fingers)

@@ -42,7 +42,7 @@ def angle_error(a, b) -> float:
 
 def runs(out: Path, noise: float, quick: bool):
     """Yield (condition, store) for every grid run at ``noise``, running the missing ones."""
-    from protocols.slip_grid import conditions, run_slip_in_place
+    from tactile_flow.protocols.slip_grid import conditions, run_slip_in_place
     conds = conditions()
     if quick:
         conds = [c for c in conds if c.surface == "flat" and c.press_force == conds[0].press_force]
@@ -58,9 +58,9 @@ def runs(out: Path, noise: float, quick: bool):
 
 def evaluate(store: Path, model, cfg):
     """(truth row, slip estimate of the matched contact segment, score row) of one run."""
-    from analysis.load import load_run, open_truth
-    from analysis.pipeline import analyse
-    from analysis.score import score
+    from tactile_flow.analysis.load import load_run, open_truth
+    from tactile_flow.analysis.pipeline import analyse
+    from tactile_flow.analysis.score import score
     a = analyse(load_run(store), cfg, model)
     sc = score(a, open_truth(store))
     row = sc.get("object_motions", [{}])[0]
@@ -128,9 +128,9 @@ def real_contact_rate() -> dict:
     a baseline pooled over each file and the real resting sensors' noise (as the tests do)."""
     import csv
 
-    from analysis.preprocess import despike
-    from importers import read_bag, select_fingers
-    from tactile import contact, signals
+    from tactile_flow.analysis.preprocess import despike
+    from tactile_flow.importers import read_bag, select_fingers
+    from tactile_flow.tactile import contact, signals
     data = ROOT / "tests" / "data"
     rec, _ = select_fingers(read_bag(data / "biotac_rest_untouched.bag"))
     z = signals.counts_to_impedance(rec.electrodes.astype(float))
@@ -158,8 +158,8 @@ def main(argv=None) -> None:
     ap.add_argument("--noise", type=float, nargs="+", default=[1.0])
     ap.add_argument("--quick", action="store_true", help="flat object and light force only")
     args = ap.parse_args(argv)
-    from analysis.config import load_config
-    from analysis.pipeline import get_model
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.pipeline import get_model
     cfg = load_config({"figures": False, "progress": False})
     model = get_model(cfg.tactile)
     t0 = time.perf_counter()

@@ -20,7 +20,7 @@ import xarray as xr
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from protocols.slip_grid import conditions, run_slip_in_place  # noqa: E402
+from tactile_flow.protocols.slip_grid import conditions, run_slip_in_place  # noqa: E402
 
 
 def main() -> None:

@@ -65,8 +65,8 @@ def bare_dynamic_cpu(store: Path, cfg) -> float:
     """CPU of OpenCV's Farnebäck between consecutive frames of every (window, view) the analysis
     renders: every pair, called directly (the analysis skips pairs of empty frames)."""
     import cv2
-    from analysis.load import load_run
-    from analysis.pipeline import analyse, get_model
+    from tactile_flow.analysis.load import load_run
+    from tactile_flow.analysis.pipeline import analyse, get_model
     a = analyse(load_run(store), cfg, get_model(cfg.tactile))
     c = cfg.tactile.flow
     frames = [vr.frames for cf in a.flows for vr in cf.views.values()]
@@ -79,12 +79,12 @@ def bare_dynamic_cpu(store: Path, cfg) -> float:
 
 
 def bench_analysis(store: Path, work: Path, repeat: int) -> None:
-    from analysis import figures
-    from analysis.config import load_config
-    from analysis.load import load_run
-    from analysis.pipeline import analyse, get_model
-    from analysis.run import analyze_run
-    from cliapp.heap import long_lived_frozen
+    from tactile_flow.analysis import figures
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.load import load_run
+    from tactile_flow.analysis.pipeline import analyse, get_model
+    from tactile_flow.analysis.run import analyze_run
+    from tactile_flow.cliapp.heap import long_lived_frozen
     cfg = load_config({"progress": False, "workers": 1})
     get_model(cfg.tactile)
     analyze_run(fresh(store, work, "warm"), {"progress": False, "figures": False}, console=QUIET)   # numba, caches
@@ -111,10 +111,10 @@ def bench_analysis(store: Path, work: Path, repeat: int) -> None:
 def bench_farneback(store: Path, repeat: int) -> None:
     import cv2
     import numpy as np
-    from analysis.config import load_config
-    from analysis.load import load_run
-    from analysis.pipeline import analyse, get_model
-    from tactile import flow
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.load import load_run
+    from tactile_flow.analysis.pipeline import analyse, get_model
+    from tactile_flow.tactile import flow
     cfg = load_config({"progress": False, "workers": 1})
     a = analyse(load_run(store), cfg, get_model(cfg.tactile))
     c = cfg.tactile.flow
@@ -149,8 +149,8 @@ def bench_farneback(store: Path, repeat: int) -> None:
 
 
 def bench_workers(store: Path, work: Path, repeat: int) -> None:
-    from tactile.warmup import available_cores
-    from analysis.run import analyze_run
+    from tactile_flow.tactile.warmup import available_cores
+    from tactile_flow.analysis.run import analyze_run
     cores = available_cores()
     walls, serial, jobs = {}, {}, {}
     for figures in (False, True):
@@ -255,7 +255,7 @@ def simulated(protocol: str, work: Path) -> Path:
 
 
 def bench_dis(work: Path) -> None:
-    from analysis.run import analyze_run
+    from tactile_flow.analysis.run import analyze_run
     methods = [("farneback", {}), *((f"dis_{p}", {"method": "dis", "dis_preset": p})
                                     for p in ("ultrafast", "fast", "medium"))]
     for protocol in ("straws_sweep", "pour_grasp"):

@@ -48,8 +48,8 @@ def view_child(run_dir: str, rrd: str, fps: float) -> None:
     t0 = time.perf_counter()
     import rerun as rr
 
-    from viewer import record
-    from viewer.scene import load_scene
+    from tactile_flow.viewer import record
+    from tactile_flow.viewer.scene import load_scene
     t_import = time.perf_counter()
     scene = load_scene(run_dir, fps=fps)
     t_load = time.perf_counter()
@@ -85,12 +85,12 @@ class RecordedSensors:
     :class:`hardware.biotac.TactileSensors` the monitor uses)."""
 
     def __init__(self, frames, fingers, rate_hz):
-        from hardware.biotac import FrameTap
+        from tactile_flow.hardware.biotac import FrameTap
         self.frames, self.fingers, self.rate_hz = frames, tuple(fingers), rate_hz
         self._taps: list[FrameTap] = []
 
     def tap(self, maxlen):
-        from hardware.biotac import FrameTap
+        from tactile_flow.hardware.biotac import FrameTap
         tap = FrameTap(maxlen)
         self._taps.append(tap)
         return tap
@@ -131,7 +131,7 @@ class Clock:
 def load_frames(store: Path, seconds: float):
     import xarray as xr
 
-    from hardware.biotac import BiotacFrame
+    from tactile_flow.hardware.biotac import BiotacFrame
     b = xr.open_datatree(str(store), engine="zarr")["biotac"].to_dataset()
     n = min(b.sizes["time"], int(seconds * 100) + 50)
     e = b.electrodes.values[:n]
@@ -142,9 +142,9 @@ def load_frames(store: Path, seconds: float):
 
 
 def run_monitor(frames, fingers, views, with_viewer: bool, paced: bool, work: Path) -> dict:
-    from protocols.live import LiveConfig, LiveMonitor, tactile_config, warm_up
-    from tactile.pipeline import TactileModel
-    from viewer.live import LiveViewer
+    from tactile_flow.protocols.live import LiveConfig, LiveMonitor, tactile_config, warm_up
+    from tactile_flow.tactile.pipeline import TactileModel
+    from tactile_flow.viewer.live import LiveViewer
     model = TactileModel.build(tactile_config({}, views))
     warm_up(model, views)
     sensors, clock = RecordedSensors(frames, fingers, 100.0), Clock()

@@ -10,7 +10,7 @@ run itself is the real one; only the clock is watched from a thread.
 import threading
 import time
 
-import hardware.sim.clock as sim_clock
+import tactile_flow.hardware.sim.clock as sim_clock
 
 clocks = []
 _init = sim_clock.SimClock.__init__
@@ -31,5 +31,5 @@ def _report():
 if __name__ == "__main__":
     sim_clock.SimClock.__init__ = _record
     threading.Thread(target=_report, daemon=True).start()
-    from protocols.cli import main
+    from tactile_flow.protocols.cli import main
     main()

@@ -30,7 +30,7 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import OmegaConf
 
-from runstore.status import ExitCode
+from tactile_flow.runstore.status import ExitCode
 
 from .runner import error_line, run_app, signals_received
 

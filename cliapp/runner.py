@@ -24,8 +24,8 @@ import sys
 import threading
 import traceback
 
-from runstore.status import ExitCode
-from validation import suggest, unknown_key
+from tactile_flow.runstore.status import ExitCode
+from tactile_flow.validation import suggest, unknown_key
 
 from .config_guard import install
 from .startup import end_at_once

@@ -36,5 +36,5 @@ def tactile_recover() -> None:
     ``cliapp`` and may not import this one): signals end it at once until it has loaded
     numpy and zarr and takes them over."""
     end_at_once_on_signals()
-    from runstore.recover import command
+    from tactile_flow.runstore.recover import command
     command()

@@ -20,17 +20,23 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib.util
 import inspect
 import re
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+# tactile_flow from this tree (its folders are the package's subpackages), whatever is installed:
+# the tables describe the code beside them
+_spec = importlib.util.spec_from_file_location("tactile_flow", ROOT / "tactile_flow" / "__init__.py",
+                                               submodule_search_locations=[str(ROOT / "tactile_flow"), str(ROOT)])
+sys.modules["tactile_flow"] = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(sys.modules["tactile_flow"])
 
-from analysis import score  # noqa: E402
-from protocols.schema import ProtocolConfig  # noqa: E402
-from protocols.steps import REACTIONS, STEP_KINDS, Criterion  # noqa: E402
+from tactile_flow.analysis import score  # noqa: E402
+from tactile_flow.protocols.schema import ProtocolConfig  # noqa: E402
+from tactile_flow.protocols.steps import REACTIONS, STEP_KINDS, Criterion  # noqa: E402
 
 DOC = ROOT / "docs" / "protocols.md"
 

@@ -25,8 +25,8 @@ import numpy as np
 import xarray as xr
 from omegaconf import OmegaConf
 
-from hardware.surfaces import load_surface
-from protocols.plan import Geometry
+from tactile_flow.hardware.surfaces import load_surface
+from tactile_flow.protocols.plan import Geometry
 
 
 def first_contact(run_dir: Path) -> dict:

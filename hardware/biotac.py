@@ -14,7 +14,7 @@ from functools import cached_property
 
 import numpy as np
 
-from tactile import FINGERS, N_TAXELS  # noqa: F401  (Shadow finger order; taxels per sensor)
+from tactile_flow.tactile import FINGERS, N_TAXELS  # noqa: F401  (Shadow finger order; taxels per sensor)
 
 from .device import Device, SampleBuffer, batch_times
 from .streams import Column, Coord, Stream, as_dtype, device_time

@@ -15,7 +15,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Optional
 
-from validation import build, spec
+from tactile_flow.validation import build, spec
 
 from .biotac import FINGERS, check_fingers
 from .errors import BUFFER_RANGE_S, RATE_RANGE_HZ, ConfigError, brief, require_within

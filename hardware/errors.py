@@ -61,7 +61,7 @@ class WorkspaceError(SafetyError, ValueError):
 
 
 # one error and one message format for every config node (the validation layer)
-from validation import ConfigError, brief  # noqa: E402,F401
+from tactile_flow.validation import ConfigError, brief  # noqa: E402,F401
 
 
 def require_positive(cfg, names, key: str) -> None:

@@ -1,6 +1,6 @@
 """The real lab (``hardware=lab`` / ``hardware=lab_emulated``): one driver per device.
 
-    from hardware.lab import make_real_lab
+    from tactile_flow.hardware.lab import make_real_lab
     lab = make_real_lab(OmegaConf.load("conf/hardware/lab.yaml"), OmegaConf.load("conf/surface/straws.yaml"))
     with lab:                       # connects arm, hand, biotac, pump, scale (all closed if one fails)
         lab.arm.move_linear(pose, speed=0.01)
@@ -34,7 +34,7 @@ from .serial_biotac import SerialBiotacConfig, SerialBiotacs
 from .serial_pour import SerialPump, SerialPumpConfig, SerialScale, SerialScaleConfig
 from .shadow import RosbridgeBiotacConfig, RosbridgeBiotacs, ShadowHand, ShadowHandConfig
 from .rosbridge import RosbridgeConfig
-from validation import build, to_plain, unknown_key
+from tactile_flow.validation import build, to_plain, unknown_key
 
 from .config import WorkspaceConfig
 from .lab_container import Lab

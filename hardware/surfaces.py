@@ -153,7 +153,7 @@ def load_surface(data=None, key: str = "surface") -> Surface:
     Raises ConfigError (a ValueError) naming the key for an unknown kind, non-positive
     sizes, overlapping features, or features that do not fit on the board.
     """
-    from validation import build
+    from tactile_flow.validation import build
     cfg = data if isinstance(data, SurfaceConfig) else build(SurfaceConfig, data, key)
     if cfg.kind not in KINDS:
         raise ConfigError(f"{key}.kind", f"unknown surface {cfg.kind!r}; expected one of {', '.join(KINDS)}")

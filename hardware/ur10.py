@@ -89,7 +89,7 @@ class UR10Config:
         arm = dict(arm)
         unknown = set(arm) - set(cls.__dataclass_fields__) - {"workspace"}
         if unknown:
-            from validation import unknown_key
+            from tactile_flow.validation import unknown_key
             raise unknown_key(key, sorted(unknown)[0], set(cls.__dataclass_fields__) - {"key"} | {"workspace"})
         ws = workspace if workspace is not None else arm.pop("workspace", None)
         arm.pop("workspace", None)

@@ -1,6 +1,6 @@
 """Importers: bring recordings from elsewhere (ROS bags, CSV files) into the project's run store.
 
-    from importers import ImportSettings, import_source
+    from tactile_flow.importers import ImportSettings, import_source
     results = import_source("lab/session.bag", "imported", ImportSettings(baseline="estimate"))
     results[0].store       # imported/session/run.zarr, ready for tactile-analyze
 

@@ -31,7 +31,7 @@ from typing import Iterator
 
 import numpy as np
 
-from hardware.biotac import FINGERS, N_TAXELS
+from tactile_flow.hardware.biotac import FINGERS, N_TAXELS
 
 from .recording import CHUNK_FRAMES, ImportInputError, Recording, check_rate, concat
 from .ros1 import Ros1Read, ros1_messages

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hardware.biotac import FINGERS
-from tactile.signals import SensorCalibration
+from tactile_flow.hardware.biotac import FINGERS
+from tactile_flow.tactile.signals import SensorCalibration
 
 from .recording import CHUNK_FRAMES, ImportInputError, Recording, concat, head_of
 

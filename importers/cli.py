@@ -21,8 +21,8 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import OmegaConf
 
-from cliapp.runner import report, run_app
-from runstore.status import ExitCode
+from tactile_flow.cliapp.runner import report, run_app
+from tactile_flow.runstore.status import ExitCode
 
 from .importer import ImportIncomplete, ImportSettings, import_source
 from .recording import ImportInputError

@@ -32,9 +32,9 @@ from typing import Iterator
 
 import numpy as np
 
-from hardware.biotac import FINGERS, N_TAXELS
+from tactile_flow.hardware.biotac import FINGERS, N_TAXELS
 
-from hardware.errors import brief
+from tactile_flow.hardware.errors import brief
 
 from .recording import CHUNK_FRAMES, ImportInputError, Recording, check_rate, concat, parse_rate
 

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from cliapp.startup import end_at_once_on_signals
+from tactile_flow.cliapp.startup import end_at_once_on_signals
 
 
 def main() -> None:

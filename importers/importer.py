@@ -22,8 +22,8 @@ import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from runstore.clockmodel import OnlineClockModel
-from runstore.provenance import collect
+from tactile_flow.runstore.clockmodel import OnlineClockModel
+from tactile_flow.runstore.provenance import collect
 
 from .bag import TOPIC, BagFile
 from .baseline import Baseline, EarlyWindow, estimate_baseline, load_calibration
@@ -307,7 +307,7 @@ def _importer(src: Source) -> dict:
             return importlib.metadata.version(name)
         except importlib.metadata.PackageNotFoundError:
             return "unknown"
-    fn = "importers.bag.read_bag" if src.kind == "bag" else "importers.csv.read_csv"
+    fn = "tactile_flow.importers.bag.read_bag" if src.kind == "bag" else "tactile_flow.importers.csv.read_csv"
     out = {"name": "tactile-import", "reader": fn, "tactile-flow": version("tactile-flow")}
     if src.kind == "bag":
         out["rosbags"] = version("rosbags")

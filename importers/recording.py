@@ -19,9 +19,9 @@ from typing import Callable, Iterable, Iterator, Protocol
 
 import numpy as np
 
-from hardware.biotac import FINGERS, N_TAXELS
-from hardware.errors import RATE_RANGE_HZ, brief
-from runstore.clockmodel import ClockFit
+from tactile_flow.hardware.biotac import FINGERS, N_TAXELS
+from tactile_flow.hardware.errors import RATE_RANGE_HZ, brief
+from tactile_flow.runstore.clockmodel import ClockFit
 
 #: relative disagreement allowed between ``rate_hz`` and the rate of a file's own timestamps
 RATE_TOLERANCE = 0.02

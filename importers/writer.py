@@ -38,13 +38,13 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from hardware.biotac import COUNTS_MAX, PAC_RATE_HZ
-from hardware.device import batch_times
-from hardware.streams import as_dtype
-from runstore import RunStatus, RunStore, inflight, rundir
-from runstore.clockmodel import ClockFit, latency_stats, sequence_gaps
-from runstore.provenance import write_run_json
-from runstore.layout import event_columns
+from tactile_flow.hardware.biotac import COUNTS_MAX, PAC_RATE_HZ
+from tactile_flow.hardware.device import batch_times
+from tactile_flow.hardware.streams import as_dtype
+from tactile_flow.runstore import RunStatus, RunStore, inflight, rundir
+from tactile_flow.runstore.clockmodel import ClockFit, latency_stats, sequence_gaps
+from tactile_flow.runstore.provenance import write_run_json
+from tactile_flow.runstore.layout import event_columns
 
 from .baseline import Baseline
 from .recording import ImportInputError, PreparedSource, Recording, diffs, median_of, rate_of

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 from importlib import import_module
 
-from hardware.errors import ConfigError
+from tactile_flow.hardware.errors import ConfigError
 
-BACKENDS = {"sim": "hardware.sim:make_sim_lab", "lab": "hardware.lab:make_real_lab"}
+BACKENDS = {"sim": "tactile_flow.hardware.sim:make_sim_lab", "lab": "tactile_flow.hardware.lab:make_real_lab"}
 
 
 def make_lab(cfg):
@@ -26,7 +26,7 @@ def check_hardware(cfg) -> None:
     """Check every value of ``cfg.hardware`` (a ``ConfigError`` naming the key) without
     connecting anything: what ``plan_only`` does in place of :func:`make_lab`."""
     if cfg.hardware.get("backend") == "sim":
-        from hardware.config import load_config
+        from tactile_flow.hardware.config import load_config
         load_config(cfg.hardware)                 # the values only: no simulated world is built
     else:
         make_lab(cfg)                             # real drivers check their configs when made, unconnected

@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from hardware.errors import ConfigError
-from importers.baseline import Baseline, load_calibration
-from importers.recording import ImportInputError
-from importers.sources import sha256_file
-from tactile.signals import SensorCalibration
+from tactile_flow.hardware.errors import ConfigError
+from tactile_flow.importers.baseline import Baseline, load_calibration
+from tactile_flow.importers.recording import ImportInputError
+from tactile_flow.importers.sources import sha256_file
+from tactile_flow.tactile.signals import SensorCalibration
 
 KEY = "hardware.biotac_calibration"
 

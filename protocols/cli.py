@@ -22,9 +22,9 @@ from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from omegaconf import OmegaConf
 
-import cliapp.jobresults as jobresults
-from cliapp.runner import report
-from runstore import RunStatus, rundir
+import tactile_flow.cliapp.jobresults as jobresults
+from tactile_flow.cliapp.runner import report
+from tactile_flow.runstore import RunStatus, rundir
 
 from .interrupts import Interrupts
 from .schema import check_targets, register

@@ -24,10 +24,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hardware.errors import DeviceError, ProtectiveStopError
-from runstore.status import RunStatus
-from tactile.slip import CAUSES
-from validation import build
+from tactile_flow.hardware.errors import DeviceError, ProtectiveStopError
+from tactile_flow.runstore.status import RunStatus
+from tactile_flow.tactile.slip import CAUSES
+from tactile_flow.validation import build
 
 from .interlocks import InterlockTripped, Interlocks, SafetyConfig
 from .interrupts import Interrupts

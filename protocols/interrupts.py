@@ -36,7 +36,7 @@ import sys
 import threading
 from contextlib import contextmanager
 
-from cliapp.runner import note_signal, redeliver_dropped_interrupt
+from tactile_flow.cliapp.runner import note_signal, redeliver_dropped_interrupt
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 RAISING = ("setup", "analysis")

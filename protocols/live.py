@@ -25,12 +25,12 @@ from typing import Optional
 
 import numpy as np
 
-from tactile._lazy import lazy_import
-from tactile.flow import FlowConfig
-from tactile.pipeline import TactileConfig, TactileModel
-from tactile.slip import CAUSES, SlipConfig, SlipDetector
+from tactile_flow.tactile._lazy import lazy_import
+from tactile_flow.tactile.flow import FlowConfig
+from tactile_flow.tactile.pipeline import TactileConfig, TactileModel
+from tactile_flow.tactile.slip import CAUSES, SlipConfig, SlipDetector
 
-signals, online = lazy_import("tactile.signals"), lazy_import("tactile.online")   # numba: on first use
+signals, online = lazy_import("tactile_flow.tactile.signals"), lazy_import("tactile_flow.tactile.online")   # numba: on first use
 
 ARROWS = "→↘↓↙←↖↑↗"          # image directions: +col is right, +row is down
 VIEWER_ENTRY_POINTS = "tactile_flow.live_viewer"     # live.viewer=NAME names one of these

@@ -15,11 +15,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from omegaconf import OmegaConf
 
-from hardware.arm import trapezoid_time
-from hardware.errors import brief
-from hardware.transforms import rotvec_to_matrix
-from hardware.surfaces import Surface, load_surface
-from tactile.geometry import cached_fit_ellipsoid, load_taxels
+from tactile_flow.hardware.arm import trapezoid_time
+from tactile_flow.hardware.errors import brief
+from tactile_flow.hardware.transforms import rotvec_to_matrix
+from tactile_flow.hardware.surfaces import Surface, load_surface
+from tactile_flow.tactile.geometry import cached_fit_ellipsoid, load_taxels
 
 from .steps import Criterion, ProtocolError, Repeat, Step, parse_steps
 

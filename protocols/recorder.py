@@ -37,9 +37,9 @@ from typing import Callable
 import numpy as np
 
 
-from runstore import RunStatus, RunStore, utc_now
-from runstore.clockmodel import OnlineClockModel, latency_stats, sequence_gaps
-from runstore.layout import event_columns
+from tactile_flow.runstore import RunStatus, RunStore, utc_now
+from tactile_flow.runstore.clockmodel import OnlineClockModel, latency_stats, sequence_gaps
+from tactile_flow.runstore.layout import event_columns
 
 log = logging.getLogger(__name__)
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import yaml
 
-from runstore.provenance import git_state
+from tactile_flow.runstore.provenance import git_state
 
 IGNORED_KEYS = ("resume", "progress", "verbose")
 KEPT = (".hydra", "previous", ".tactile.lock")     # never set aside: Hydra's record, earlier attempts, the lock

@@ -16,13 +16,13 @@ from pathlib import Path
 from omegaconf import OmegaConf
 from tqdm import tqdm
 
-from cliapp.heap import long_lived_frozen
-from hardware.errors import ConfigError
-from tactile.frames import DEFAULT_VIEWS
-from tactile.geometry import load_taxels
-from runstore import RunStore, provenance, rundir, utc_now
-from tactile import warmup
-from tactile.pipeline import TactileModel
+from tactile_flow.cliapp.heap import long_lived_frozen
+from tactile_flow.hardware.errors import ConfigError
+from tactile_flow.tactile.frames import DEFAULT_VIEWS
+from tactile_flow.tactile.geometry import load_taxels
+from tactile_flow.runstore import RunStore, provenance, rundir, utc_now
+from tactile_flow.tactile import warmup
+from tactile_flow.tactile.pipeline import TactileModel
 
 from .calibration import session_baseline, store_baseline
 from .engine import FAILED, Outcome, RunEngine

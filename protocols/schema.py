@@ -78,7 +78,7 @@ class RunConfig:
 
 
 # Classes a config may name with ``_target_`` (Hydra instantiates them); nothing else.
-ALLOWED_TARGETS = ("protocols.cli.SweepSummary", "protocols.cli.RunDirLock")
+ALLOWED_TARGETS = ("tactile_flow.protocols.cli.SweepSummary", "tactile_flow.protocols.cli.RunDirLock")
 
 
 def check_targets(node, key: str = "") -> None:
@@ -107,7 +107,7 @@ def check_config(cfg) -> None:
     one) and a bad ``analysis`` node; raises :class:`validation.ConfigError`."""
     from importlib.metadata import entry_points
 
-    from validation import check_keys
+    from tactile_flow.validation import check_keys
     check_keys(cfg, RunConfig, "")
     for ep in entry_points(group=ANALYSIS_CHECK):
         ep.load()(cfg.get("analysis"))

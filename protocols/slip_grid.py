@@ -1,7 +1,7 @@
 """Slip-in-place runs from Python, for benchmarks: the grid of ``+experiment=slip_in_place_grid``
 without the command line.
 
-    from protocols.slip_grid import conditions, run_slip_in_place
+    from tactile_flow.protocols.slip_grid import conditions, run_slip_in_place
     for c in conditions():                       # 72 conditions, as the Hydra grid
         result = run_slip_in_place(out / c.name, c, noise=1.0)
         result.store                             # run.zarr, truth/object_motions inside
@@ -18,7 +18,7 @@ import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
-from hardware.sim.contact_check import PRESS_FORCES
+from tactile_flow.hardware.sim.contact_check import PRESS_FORCES
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 DIRECTIONS_DEG = (0.0, 60.0, 120.0, 180.0, 240.0, 300.0)

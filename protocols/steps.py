@@ -28,8 +28,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hardware.hand import JOINT_NAMES
-from validation import ConfigError, brief, unknown_key
+from tactile_flow.hardware.hand import JOINT_NAMES
+from tactile_flow.validation import ConfigError, brief, unknown_key
 
 
 class ProtocolError(ConfigError):

@@ -15,12 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hardware.arm import AXIS6, ArmState  # noqa: F401  (AXIS6 re-exported)
-from hardware.biotac import FINGERS, BiotacFrame
-from hardware.hand import HandState
-from hardware.pour import PumpState, ScaleReading
-from hardware.stage import STAGE_AXES, StageState  # noqa: F401  (STAGE_AXES re-exported)
-from hardware.streams import Column, Stream
+from tactile_flow.hardware.arm import AXIS6, ArmState  # noqa: F401  (AXIS6 re-exported)
+from tactile_flow.hardware.biotac import FINGERS, BiotacFrame
+from tactile_flow.hardware.hand import HandState
+from tactile_flow.hardware.pour import PumpState, ScaleReading
+from tactile_flow.hardware.stage import STAGE_AXES, StageState  # noqa: F401  (STAGE_AXES re-exported)
+from tactile_flow.hardware.streams import Column, Stream
 
 from .jsonvalues import jsonable
 from .status import STORE_STATUSES as STATUSES  # noqa: F401  (re-exported)

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from hardware.errors import brief
+from tactile_flow.hardware.errors import brief
 
 from . import rundir
 from .provenance import write_run_json
@@ -169,7 +169,7 @@ def describe(result: dict) -> str:
 
 
 def main(argv=None) -> int:
-    from validation.cli import ArgumentParser
+    from tactile_flow.validation.cli import ArgumentParser
     parser = ArgumentParser(prog="tactile-recover", description=__doc__.replace("``", "").split("\nExit status")[0],
                             epilog=EPILOG)
     parser.add_argument("paths", nargs="+", help="run.zarr directories (or run directories holding one)")

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from hardware.biotac import FINGERS
+from tactile_flow.hardware.biotac import FINGERS
 
 from . import inflight
 from .appender import GrowingArray, MetadataTemplate, atomic_write, write_all

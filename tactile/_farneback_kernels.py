@@ -13,6 +13,10 @@ float32 = the quadratic's coefficients (b_y, b_x, a_yy, a_xx, a_xy) per pixel; t
 (H, W, 5) float32 = (G11, G12, G22, h1, h2); a flow (H, W, 2) float32 = (Δcol, Δrow) in pixels.
 """
 
+# numba's on-disk cache is checked against this file's size and time and names the module it was
+# compiled in: this file changed when the package moved under tactile_flow (0.2), so a cache from
+# before the move is not loaded.
+
 from __future__ import annotations
 
 import numba

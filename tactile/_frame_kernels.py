@@ -6,6 +6,10 @@ Kept apart from the API (as scikit-image keeps its ``_kernels``) so that importi
 Everything here is private to :mod:`tactile.frames` and :mod:`tactile.online`.
 """
 
+# numba's on-disk cache is checked against this file's size and time and names the module it was
+# compiled in: this file changed when the package moved under tactile_flow (0.2), so a cache from
+# before the move is not loaded.
+
 from __future__ import annotations
 
 import math

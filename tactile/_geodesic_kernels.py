@@ -2,6 +2,10 @@
 subdivided and Richardson-extrapolated discrete geodesics. Private; loaded on first use.
 """
 
+# numba's on-disk cache is checked against this file's size and time and names the module it was
+# compiled in: this file changed when the package moved under tactile_flow (0.2), so a cache from
+# before the move is not loaded.
+
 from __future__ import annotations
 
 import numba

@@ -47,7 +47,7 @@ def lazy_import(name: str) -> ModuleType:   # a stand-in until then, read like t
     """The module ``name``, imported when one of its attributes is first read (the module
     itself if it is imported already).
 
-    >>> signals = lazy_import("tactile.signals")
+    >>> signals = lazy_import("tactile_flow.tactile.signals")
     >>> signals.N_TAXELS
     24
     """

@@ -6,6 +6,10 @@ cols × rows = look, a positive ``curl`` is a rotation counter-clockwise about t
 (pressing in) while a negative one is a pattern contracting (releasing).
 """
 
+# numba's on-disk cache is checked against this file's size and time and names the module it was
+# compiled in: this file changed when the package moved under tactile_flow (0.2), so a cache from
+# before the move is not loaded.
+
 from __future__ import annotations
 
 import dataclasses

@@ -27,7 +27,7 @@ exit status: 0 done, 2 bad option (one line)."""
 
 
 def main(argv: list[str] | None = None) -> int:
-    from validation.cli import ArgumentParser, help_text
+    from tactile_flow.validation.cli import ArgumentParser, help_text
     parser = ArgumentParser(prog="tactile-demo", description=help_text(__doc__), epilog=EPILOG)
     parser.add_argument("--speed", type=float, default=10.0, help="sliding speed, mm/s (default 10)")
     parser.add_argument("--angle", type=float, default=0.0,

@@ -31,14 +31,14 @@ __all__ = ["Expansions", "Stream", "expand", "pair_flows", "supports"]
 _MIN_PYRAMID = 32
 """OpenCV builds a pyramid level only where the scaled frame is at least this many pixels."""
 
-_k = lazy_import("tactile._farneback_kernels")   # numba: compiled on first use
+_k = lazy_import("tactile_flow.tactile._farneback_kernels")   # numba: compiled on first use
 
 
 def supports(shape, config) -> bool:
     """Whether frames of ``shape`` (…, H, W) with ``config`` (a :class:`tactile.flow.FlowConfig`)
     are flowed here: one pyramid level, box window, no initial flow, ``poly_n`` 5 or 7.
 
-    >>> from tactile.flow import FlowConfig
+    >>> from tactile_flow.tactile.flow import FlowConfig
     >>> supports((28, 40), FlowConfig()), supports((480, 640), FlowConfig())
     (True, False)
     """

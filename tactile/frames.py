@@ -53,7 +53,7 @@ __all__ = ["DEFAULT_VIEWS", "FramePlan", "View", "WalkIndex", "frame_cache", "fr
            "frame_scratch", "linear_operator", "linear_uint8", "make_frame_plan", "render", "render_activation", "to_uint8",
            "view_axes"]
 
-_k = lazy_import("tactile._frame_kernels")   # numba: compiled on first use
+_k = lazy_import("tactile_flow.tactile._frame_kernels")   # numba: compiled on first use
 
 MIN_FRAME_PIXELS = 8
 

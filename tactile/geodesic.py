@@ -57,7 +57,7 @@ from .ellipsoid import _check_axes, _check_on_surface, ellipsoid_angles
 
 __all__ = ["ALGORITHM_VERSION", "GEODESIC_METHODS", "geodesic_distances", "geodesic_path"]
 
-_kernels = lazy_import("tactile._geodesic_kernels")   # numba: compiled on first use
+_kernels = lazy_import("tactile_flow.tactile._geodesic_kernels")   # numba: compiled on first use
 
 #: Part of every cache key; bump when a change alters computed distances.
 ALGORITHM_VERSION = "geodesic-1"

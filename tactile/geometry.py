@@ -11,7 +11,7 @@ The pieces live in modules of one idea each:
 - :mod:`tactile.surface`: the kernel of the geodesic distance (:func:`kernel_weights`) and the
   interpolation over the surface mesh.
 
->>> from tactile.geometry import fit_ellipsoid, load_taxels
+>>> from tactile_flow.tactile.geometry import fit_ellipsoid, load_taxels
 >>> fit_ellipsoid(load_taxels()).axes.round(1).tolist()         # semi-axes (mm)
 [12.0, 7.8, 7.0]
 """

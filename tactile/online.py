@@ -52,6 +52,10 @@ With ``config.render = "linear"`` the frames may differ from the offline ones by
 one float32 BLAS product, whose rounding depends on the number of frames in the product.
 """
 
+# numba's on-disk cache is checked against this file's size and time and names the module it was
+# compiled in: this file changed when the package moved under tactile_flow (0.2), so a cache from
+# before the move is not loaded.
+
 from __future__ import annotations
 
 import math

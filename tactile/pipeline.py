@@ -23,8 +23,8 @@ __all__ = ["UNLOADED", "TactileConfig", "TactileModel", "ViewResult", "activatio
            "process_view"]
 
 # numba kernels and SciPy load on first use: the configs above import in milliseconds
-aggregate, frames, geometry = (lazy_import(f"tactile.{m}") for m in ("aggregate", "frames", "geometry"))
-signals, surface = lazy_import("tactile.signals"), lazy_import("tactile.surface")
+aggregate, frames, geometry = (lazy_import(f"tactile_flow.tactile.{m}") for m in ("aggregate", "frames", "geometry"))
+signals, surface = lazy_import("tactile_flow.tactile.signals"), lazy_import("tactile_flow.tactile.surface")
 
 
 @dataclass(frozen=True)

@@ -48,6 +48,10 @@ prior of the *first* sample, with no prediction step at t = 0).
 All functions are pure: inputs are never modified; results are new float64 arrays.
 """
 
+# numba's on-disk cache is checked against this file's size and time and names the module it was
+# compiled in: this file changed when the package moved under tactile_flow (0.2), so a cache from
+# before the move is not loaded.
+
 from __future__ import annotations
 
 from dataclasses import dataclass

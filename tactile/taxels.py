@@ -20,7 +20,7 @@ def load_taxels() -> np.ndarray:
     Predicting Grasp Stability with Tactile Sensors" (repository 3dperceptionlab/tactile-gcn,
     converted from inches and remapped to this frame; see ``tactile/data/README.md``).
     """
-    text = importlib.resources.files("tactile").joinpath("data", _TAXEL_FILE).read_text()
+    text = importlib.resources.files("tactile_flow.tactile").joinpath("data", _TAXEL_FILE).read_text()
     table = np.genfromtxt(io.StringIO(text), delimiter=",", names=True, dtype=None,
                           encoding="utf-8")
     order = np.argsort(table["taxel"])

@@ -62,18 +62,18 @@ def _entries(group: str, config) -> list[tuple[str, str]]:
     under ``config`` (a :class:`tactile.pipeline.TactileConfig`); the empty list if it calls none."""
     from . import farneback
     if group == "frames":
-        return [("tactile._frame_kernels", k) for k in
+        return [("tactile_flow.tactile._frame_kernels", k) for k in
                 (("_rasterise", "_render_frames") if config.render == "exact" else ("_rasterise", "_store_u8"))]
     if group == "flow":
-        flow = [("tactile._farneback_kernels", "expand"), ("tactile._farneback_kernels", "flows")] \
+        flow = [("tactile_flow.tactile._farneback_kernels", "expand"), ("tactile_flow.tactile._farneback_kernels", "flows")] \
             if farneback.supports(config.size, config.flow) else []
-        return flow + [("tactile.aggregate", "_aggregate")]
+        return flow + [("tactile_flow.tactile.aggregate", "_aggregate")]
     if group == "signals":
-        return [("tactile.signals", k) for k in ("_gains_kernel", "_filter_kernel", "_smooth_kernel_inplace",
+        return [("tactile_flow.tactile.signals", k) for k in ("_gains_kernel", "_filter_kernel", "_smooth_kernel_inplace",
                                                  "_median_kernel")]
     if group == "online":
-        return [("tactile.online", "_filter_step"), ("tactile.online", "_results"),
-                ("tactile._frame_kernels", "_render_activation_u8"), ("tactile._farneback_kernels", "advance")]
+        return [("tactile_flow.tactile.online", "_filter_step"), ("tactile_flow.tactile.online", "_results"),
+                ("tactile_flow.tactile._frame_kernels", "_render_activation_u8"), ("tactile_flow.tactile._farneback_kernels", "advance")]
     _unknown(group)
 
 
@@ -194,7 +194,7 @@ def compiling(config, workers: int | None = None, console=None, groups=ANALYSIS)
     children = []
     try:
         for share in _share_out(cold, workers):
-            child = subprocess.Popen([sys.executable, "-m", "tactile.warmup", *share], stdin=subprocess.PIPE,
+            child = subprocess.Popen([sys.executable, "-m", "tactile_flow.tactile.warmup", *share], stdin=subprocess.PIPE,
                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
             children.append(child)
             with contextlib.suppress(BrokenPipeError):

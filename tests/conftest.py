@@ -69,7 +69,7 @@ def cache_dir(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def model(cache_dir):
-    from tactile.pipeline import TactileConfig, TactileModel
+    from tactile_flow.tactile.pipeline import TactileConfig, TactileModel
     return TactileModel.build(TactileConfig(), cache_dir=cache_dir)
 
 

@@ -35,7 +35,7 @@ class TiledReader:
     """The resting bag tiled to ``frames`` frames with presses (the importer's Reader protocol)."""
 
     def __init__(self, frames: int, press_every_s: float):
-        from importers.bag import BagFile, read_bag
+        from tactile_flow.importers.bag import BagFile, read_bag
         rest = read_bag(BAG)
         self.path, self.meta, self.finger_names = BAG, dict(BagFile(BAG).meta), rest.fingers
         self.rest = five_fingers(replace(rest, pac=None))      # PAC is not what the analysis reads
@@ -76,9 +76,9 @@ class TiledReader:
 
 def make_store(run_dir: Path, hours: float, press_every_s: float) -> Path:
     """Write ``run_dir/run.zarr`` holding ``hours`` h of tiled record; its path."""
-    from importers.importer import scan
-    from importers.recording import PreparedSource
-    from importers.writer import write_import_store
+    from tactile_flow.importers.importer import scan
+    from tactile_flow.importers.recording import PreparedSource
+    from tactile_flow.importers.writer import write_import_store
     reader = TiledReader(int(round(hours * 3600 * RATE_HZ)), press_every_s)
     found = scan(reader)
     prepared = PreparedSource(reader, found, found.fingers, {"kept": list(found.fingers)})

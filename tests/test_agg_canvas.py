@@ -6,7 +6,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from PIL import Image
 
-from analysis import agg_canvas
+from tactile_flow.analysis import agg_canvas
 
 TEXTS = [  # (x, y, text, keyword arguments): plain, rotated, multi-line, the units' symbols
     (0.05, 0.85, "time since run start (s)", {}),
@@ -55,7 +55,7 @@ def test_figure_saved_as_drawn(tmp_path):
 def test_a_figure_is_written_by_matplotlib_when_the_fast_canvas_fails(tmp_path, monkeypatch, caplog):
     """The canvas uses matplotlib's private text API: a matplotlib that changes it costs speed,
     not the figure."""
-    from analysis import figures
+    from tactile_flow.analysis import figures
 
     def broken(self, s, prop):
         raise AttributeError("'FontManager' object has no attribute '_find_fonts_by_props'")

@@ -12,12 +12,12 @@ from pathlib import Path
 
 import pytest
 
-from analysis.run import analyze_run
-from protocols.resume import analysis_state
+from tactile_flow.analysis.run import analyze_run
+from tactile_flow.protocols.resume import analysis_state
 
 pytestmark = pytest.mark.slow
-RUN = [sys.executable, "-c", "from protocols.cli import main; main()", "progress=false"]
-ANALYZE = [sys.executable, "-c", "from analysis.cli import main; main()"]
+RUN = [sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "progress=false"]
+ANALYZE = [sys.executable, "-c", "from tactile_flow.analysis.cli import main; main()"]
 FAST = {"progress": False, "figures": False}
 
 
@@ -130,10 +130,10 @@ def test_a_ctrl_c_as_the_figure_workers_start_leaves_no_worker_for_the_exit_to_w
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    from analysis import figures
-    from analysis.config import load_config
-    from analysis.load import load_run
-    from analysis.pipeline import analyse, get_model
+    from tactile_flow.analysis import figures
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.load import load_run
+    from tactile_flow.analysis.pipeline import analyse, get_model
 
     cfg = load_config({"progress": False})
     model = get_model(cfg.tactile)
@@ -156,7 +156,7 @@ def test_a_signal_while_the_figure_workers_fork_waits_for_them_and_never_reaches
     """Around the workers' start SIGINT is noted, then raised once they are all known; a
     worker forked meanwhile inherits the noting handler, so a Ctrl-C at the terminal before it
     ignores SIGINT itself is dropped there, not a ``KeyboardInterrupt`` and a traceback."""
-    from analysis.figures import _signals_deferred
+    from tactile_flow.analysis.figures import _signals_deferred
 
     with pytest.raises(KeyboardInterrupt):
         with _signals_deferred():

@@ -11,8 +11,8 @@ from pathlib import Path
 import pytest
 import xarray as xr
 
-from analysis.load import AnalysisInputError
-from analysis.run import analyze_run
+from tactile_flow.analysis.load import AnalysisInputError
+from tactile_flow.analysis.run import analyze_run
 
 BIN = Path(sys.executable).parent
 FAST = {"progress": False, "figures": False}
@@ -187,7 +187,7 @@ def test_workers_give_identical_results(runs, tmp_path):
 def test_a_figure_that_fails_in_a_worker_fails_the_analysis_and_leaves_nothing(runs, tmp_path, monkeypatch):
     """A fault of one figure, drawn in a forked worker, reaches the caller as that figure's own
     error; nothing of the analysis is left in the run directory and no worker outlives it."""
-    from analysis import figures
+    from tactile_flow.analysis import figures
 
     def broken(a):
         raise ValueError("taxels figure: broken on purpose")

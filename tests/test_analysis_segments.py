@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from analysis import labels as labelling
-from analysis import segments as seg
-from analysis.config import AnalysisConfigError, load_config
+from tactile_flow.analysis import labels as labelling
+from tactile_flow.analysis import segments as seg
+from tactile_flow.analysis.config import AnalysisConfigError, load_config
 
 RATE = 100.0
 

@@ -13,7 +13,7 @@ import pytest
 import zarr
 
 from conftest import tmpfs
-from protocols.store import RunStore, open_run
+from tactile_flow.protocols.store import RunStore, open_run
 
 LIVE = (("ff", "th"), ("a", "b", "c"))
 
@@ -165,7 +165,7 @@ def test_a_write_that_fails_midway_is_rolled_back_and_retried(small_disk):
 
 
 def test_metadata_it_does_not_know_is_refused_with_the_array_named(tmp_path):
-    from runstore.appender import GrowingArray
+    from tactile_flow.runstore.appender import GrowingArray
     store = RunStore.create(tmp_path / "run.zarr", protocol="unit_test")
     meta = json.loads((store.path / "arm" / "tcp_pose" / "zarr.json").read_bytes())
     with pytest.raises(ValueError, match=r"arm/tcp_pose.*codecs"):

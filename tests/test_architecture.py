@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+PREFIX = "tactile_flow."     # the one installed import name; the folders are its subpackages
 
 #: package -> the project packages it may import (docs/architecture.md, "Dependency direction")
 ALLOWED = {
@@ -41,7 +42,8 @@ def modules(package: str):
 
 
 def imports(module: str, path: Path) -> list[tuple[int, str]]:
-    """(line, absolute module) of every import in the file, relative ones resolved."""
+    """(line, module) of every import in the file, relative ones resolved, the project's own
+    named without their ``tactile_flow.`` prefix (as ``modules`` names them)."""
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
     out = []
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
@@ -55,7 +57,7 @@ def imports(module: str, path: Path) -> list[tuple[int, str]]:
                 target = node.module
             out.append((node.lineno, target))
             out += [(node.lineno, f"{target}.{a.name}") for a in node.names]
-    return out
+    return [(line, t.removeprefix(PREFIX)) for line, t in out]
 
 
 @pytest.mark.parametrize("package", sorted(ALLOWED))
@@ -90,9 +92,10 @@ def test_importing_a_package_loads_nothing_above_it():
     """Every module of the package imported in a fresh interpreter (``__main__`` scripts and
     the re-exports aside): only the packages below it may be loaded."""
     code = ("import importlib, json, sys\nfor m in json.loads(sys.argv[1]): importlib.import_module(m)\n"
-            "print(json.dumps(sorted({m.split('.')[0] for m in sys.modules} & set(json.loads(sys.argv[2])))))")
+            "print(json.dumps(sorted({m.split('.')[1] for m in sys.modules if m.startswith('tactile_flow.')}"
+            " & set(json.loads(sys.argv[2])))))")
     for package, allowed in ALLOWED.items():
-        names = [m for m, path in modules(package) if m not in RE_EXPORTS and not m.endswith("__main__")]
+        names = [PREFIX + m for m, path in modules(package) if m not in RE_EXPORTS and not m.endswith("__main__")]
         out = subprocess.run([sys.executable, "-c", code, json.dumps(names), json.dumps(sorted(ALLOWED))],
                              cwd=ROOT, capture_output=True, text=True, check=True).stdout
         loaded = set(json.loads(out)) - {package}
@@ -116,8 +119,8 @@ def test_importing_a_run_and_its_analysis_loads_no_scipy():
     """No SciPy package is loaded but where it is used: the ellipsoid fit's optimiser on a cache
     miss, the pour's median filter (``scipy.ndimage`` alone cost a start ~0.2 s on one core).
     numba imports SciPy's top level (~10 ms), so that and its private modules are allowed."""
-    code = ("import sys, protocols.cli, protocols.entry, protocols.run, analysis.run, analysis.entry\n"
-            "import analysis.figures, viewer.draw\n"
+    code = ("import sys\nfrom tactile_flow.protocols import cli, entry, run\nfrom tactile_flow.analysis import run, entry\n"
+            "from tactile_flow.analysis import figures\nfrom tactile_flow.viewer import draw\n"
             "print(sorted(m for m in sys.modules if m.startswith('scipy.') and not m.split('.')[1].startswith('_')\n"
             "             and m not in ('scipy.version', 'scipy.__config__')))")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True).stdout
@@ -135,7 +138,7 @@ def test_every_import_of_the_project_names_a_module_that_exists(package):
     module that moved must not leave one behind pointing at its old place."""
     bad = []
     for module, path in modules(package):
-        base = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        base = PREFIX + (module if path.name == "__init__.py" else module.rpartition(".")[0])
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
             if isinstance(node, ast.ImportFrom):
                 target = ".".join(base.split(".")[: len(base.split(".")) - node.level + 1] + [node.module or ""]) \
@@ -146,5 +149,9 @@ def test_every_import_of_the_project_names_a_module_that_exists(package):
             else:
                 continue
             bad += [f"{path.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names
-                    if n.split(".")[0] in ALLOWED and not _module_exists(n)]
+                    if n.startswith(PREFIX) and not _module_exists(n.removeprefix(PREFIX))]
+            # the folders are installed as tactile_flow's subpackages only: a bare `import analysis`
+            # would find another distribution's package (or a user's analysis.py)
+            bad += [f"{path.relative_to(ROOT)}:{node.lineno} imports {n} (expected tactile_flow.{n})"
+                    for n in names if n.split(".")[0] in ALLOWED]
     assert not bad, "\n".join(bad)

@@ -18,7 +18,7 @@ FAST = ["analyze=false", "progress=false"]
 
 
 def tactile_run(tmp_path, *args, timeout=240):
-    return subprocess.run([sys.executable, "-c", "from protocols.cli import main; main()", *args],
+    return subprocess.run([sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", *args],
                           cwd=tmp_path, capture_output=True, text=True, timeout=timeout)
 
 
@@ -55,8 +55,8 @@ def test_plan_only_prints_the_timeline_and_touches_nothing(tmp_path):
 def test_plan_only_does_not_build_the_lab(monkeypatch):
     from hydra import compose, initialize_config_dir
 
-    import protocols.run as run
-    from protocols.schema import register
+    import tactile_flow.protocols.run as run
+    from tactile_flow.protocols.schema import register
     register()
     monkeypatch.setattr(run, "make_lab", lambda cfg: pytest.fail("plan_only built the lab"))
     conf = Path(run.__file__).resolve().parents[1] / "conf"
@@ -100,7 +100,7 @@ def test_multirun_two_by_two_gives_four_runs_and_a_summary(tmp_path):
 
 
 def test_sigkill_leaves_a_store_with_all_but_the_last_second(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-c", "from protocols.cli import main; main()",
+    proc = subprocess.Popen([sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()",
                              "hardware.realtime=true", *FAST], cwd=tmp_path,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     wait_for_store(tmp_path)
@@ -119,7 +119,7 @@ def test_sigkill_leaves_a_store_with_all_but_the_last_second(tmp_path):
     assert tree["arm"].sizes["time_arm"] > 0 and len(tree["events"]["kind"]) >= 3
 
     # tactile-recover closes it as crashed; it then opens like any other run.
-    from runstore.recover import main as recover_main
+    from tactile_flow.runstore.recover import main as recover_main
     assert recover_main([str(store)]) == 0
     tree = xr.open_datatree(store, engine="zarr")
     assert tree.attrs["status"] == "crashed" and tree.attrs["last_sample_s"] == pytest.approx(last, abs=0.05)
@@ -130,7 +130,7 @@ def test_sigkill_leaves_a_store_with_all_but_the_last_second(tmp_path):
 
 
 def _start_realtime_run(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-c", "from protocols.cli import main; main()",
+    proc = subprocess.Popen([sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()",
                              "hardware.realtime=true", *FAST], cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     wait_for_store(tmp_path)
@@ -176,7 +176,7 @@ def test_resumed_sweep_skips_successes_reruns_the_rest_and_refuses_a_changed_con
 
 
 def test_runs_started_in_the_same_second_get_distinct_directories(tmp_path):
-    cmd = [sys.executable, "-c", "from protocols.cli import main; main()", "analyze=false", "progress=false",
+    cmd = [sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "analyze=false", "progress=false",
            "protocol.steps=[{wait: {duration: 0.05}}]"]             # a run: a plan alone leaves no directory
     procs = [subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
              for _ in range(3)]

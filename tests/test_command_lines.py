@@ -8,19 +8,19 @@ from pathlib import Path
 
 import pytest
 
-from protocols.listing import listing, summary
-from runstore.recover import describe
-from validation.cli import ArgumentParser
+from tactile_flow.protocols.listing import listing, summary
+from tactile_flow.runstore.recover import describe
+from tactile_flow.validation.cli import ArgumentParser
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMANDS = {
-    "tactile-run": "from protocols.cli import main; main()",
-    "tactile-analyze": "from analysis.cli import main; main()",
-    "tactile-import": "from importers.cli import main; main()",
-    "tactile-recover": "import sys; from runstore.recover import main; sys.exit(main())",
-    "tactile-view": "import sys; from viewer.cli import main; sys.exit(main())",
-    "tactile-emulate": "import sys; from hardware.emulators.cli import main; sys.exit(main())",
-    "tactile-demo": "import sys; from tactile.demo import main; sys.exit(main())",
+    "tactile-run": "from tactile_flow.protocols.cli import main; main()",
+    "tactile-analyze": "from tactile_flow.analysis.cli import main; main()",
+    "tactile-import": "from tactile_flow.importers.cli import main; main()",
+    "tactile-recover": "import sys; from tactile_flow.runstore.recover import main; sys.exit(main())",
+    "tactile-view": "import sys; from tactile_flow.viewer.cli import main; sys.exit(main())",
+    "tactile-emulate": "import sys; from tactile_flow.hardware.emulators.cli import main; sys.exit(main())",
+    "tactile-demo": "import sys; from tactile_flow.tactile.demo import main; sys.exit(main())",
 }
 
 
@@ -95,7 +95,7 @@ def test_bad_input_is_one_line_and_exit_2_in_every_command(tmp_path, name, args,
 
 
 def test_a_missing_protocol_names_the_ones_there_are(tmp_path):
-    from cliapp.runner import error_line
+    from tactile_flow.cliapp.runner import error_line
     from hydra.errors import MissingConfigException
     exc = MissingConfigException("In 'config': Could not find 'protocol/nope'\nAvailable options in 'protocol':"
                                  "\n\tpour_grasp\n\tstraws_sweep\nConfig search path:\n\tprovider=hydra",
@@ -188,7 +188,7 @@ class _Terminal:
 def test_the_live_line_shows_under_the_progress_bars_on_a_terminal():
     from types import SimpleNamespace
 
-    from protocols.run import ProgressConsole
+    from tactile_flow.protocols.run import ProgressConsole
     term = _Terminal()
     screen = ProgressConsole(term)
     bar = screen.bar(SimpleNamespace(duration=4.0, index=3, step=SimpleNamespace(kind="hold")))
@@ -215,7 +215,7 @@ def test_a_simulated_sweep_runs_on_the_joblib_launcher(tmp_path):
     assert len(rows) == 2 and all(",success," in r for r in rows), rows
 
 
-@pytest.mark.parametrize("entry", ["protocols.entry", "analysis.entry"])
+@pytest.mark.parametrize("entry", ["tactile_flow.protocols.entry", "tactile_flow.analysis.entry"])
 def test_help_into_a_closed_pipe_is_no_error(entry):
     """``tactile-run --help | head -1``: the reader goes away first; no traceback, exit 0."""
     proc = subprocess.Popen([sys.executable, "-c", f"from {entry} import main; main()", "--help"],
@@ -229,7 +229,7 @@ def test_a_caller_that_goes_on_after_an_app_keeps_its_garbage_collector():
     # The apps skip the collector's work at interpreter exit (everything is frozen then, from
     # an atexit handler); a process that calls one and goes on must still collect its cycles.
     code = ("import gc\n"
-            "from cliapp.runner import run_app\n"
+            "from tactile_flow.cliapp.runner import run_app\n"
             "run_app(lambda: None, argv=[])\n"
             "run_app(lambda: None, argv=[])\n"
             "a = []; a.append(a); del a\n"

@@ -8,9 +8,9 @@ import time
 
 import pytest
 
-from cliapp.config_guard import ConfigFileError, check_overrides, check_text
+from tactile_flow.cliapp.config_guard import ConfigFileError, check_overrides, check_text
 
-PY = [sys.executable, "-c", "from protocols.cli import main; main()"]
+PY = [sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()"]
 CLI = [*PY, "analyze=false", "progress=false"]
 HEAD = "# @package _global_\nprotocol:\n  name: shared\n  steps:\n    - wait: {duration: 0.1}\n"
 

@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 pytestmark = pytest.mark.slow
-RUN = [sys.executable, "-c", "from protocols.cli import main; main()", "progress=false", "analyze=false"]
-ANALYZE = [sys.executable, "-c", "from analysis.cli import main; main()", "analysis.figures=false"]
-RECOVER = [sys.executable, "-c", "from runstore.recover import main; import sys; sys.exit(main())"]
+RUN = [sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "progress=false", "analyze=false"]
+ANALYZE = [sys.executable, "-c", "from tactile_flow.analysis.cli import main; main()", "analysis.figures=false"]
+RECOVER = [sys.executable, "-c", "from tactile_flow.runstore.recover import main; import sys; sys.exit(main())"]
 
 
 @pytest.fixture(scope="module")

@@ -13,14 +13,14 @@ import sys
 
 import pytest
 
-from analysis.estimates import angle_deg
+from tactile_flow.analysis.estimates import angle_deg
 
 pytestmark = pytest.mark.slow
 TIP_YAWED_45 = "[0,0,0,2.902453,-1.202235,0]"     # rotvec of Rx(π)·Rz(45°): the default tip turned 45°
 
 
 def test_a_sweep_at_45_degrees_to_the_finger_reads_within_30_degrees(tmp_path):
-    proc = subprocess.run([sys.executable, "-c", "from protocols.cli import main; main()", "surface=bump",
+    proc = subprocess.run([sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "surface=bump",
                            f"hardware.fingertips.ff={TIP_YAWED_45}", "progress=false", "analysis.figures=false",
                            f"hydra.run.dir={tmp_path / 'run'}"], cwd=tmp_path, capture_output=True, text=True,
                           timeout=600)

@@ -6,9 +6,10 @@ import pkgutil
 
 import pytest
 
-import tactile
+from tactile_flow import tactile
 
-MODULES = sorted(m.name for m in pkgutil.iter_modules(tactile.__path__, "tactile.") if m.name != "tactile.demo")
+MODULES = sorted(m.name for m in pkgutil.iter_modules(tactile.__path__, "tactile_flow.tactile.")
+                 if m.name != "tactile_flow.tactile.demo")
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -13,8 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tactile import farneback, flow, signals
-from tactile.flow import FlowConfig
+from tactile_flow.tactile import farneback, flow, signals
+from tactile_flow.tactile.flow import FlowConfig
 
 GRASPS = Path(__file__).resolve().parent / "data" / "biotac_sp_grasps"
 
@@ -120,7 +120,7 @@ def test_threads_that_flow_at_once_in_a_fresh_process_both_get_the_kernels():
     import sys
     code = """
 import threading, numpy as np
-from tactile import flow
+from tactile_flow.tactile import flow
 frames = np.zeros((3, 28, 40), np.uint8); frames[1:, 8:16, 10:20] = 200
 errors = []
 def job():

@@ -16,17 +16,17 @@ from hydra import compose, initialize_config_dir
 
 from conftest import tmpfs, wait_for_store
 
-from hardware.sim import make_sim_lab
-from protocols.engine import FAILED, RunEngine
-from protocols.plan import make_plan
-from protocols.recorder import Recorder
-from protocols.schema import register
-from protocols.steps import Wait
-from protocols.store import RunStore
+from tactile_flow.hardware.sim import make_sim_lab
+from tactile_flow.protocols.engine import FAILED, RunEngine
+from tactile_flow.protocols.plan import make_plan
+from tactile_flow.protocols.recorder import Recorder
+from tactile_flow.protocols.schema import register
+from tactile_flow.protocols.steps import Wait
+from tactile_flow.protocols.store import RunStore
 
 register()
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
-CLI = [sys.executable, "-c", "from protocols.cli import main; main()", "analyze=false", "progress=false"]
+CLI = [sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "analyze=false", "progress=false"]
 
 
 def test_sigterm_stops_safely_like_ctrl_c(tmp_path):
@@ -91,8 +91,8 @@ def test_a_full_disk_stops_the_run_and_keeps_what_was_committed(tmp_path, small_
     assert tree.attrs["status"] == "running"                  # it could not even be closed: recovery's job
 
     # tactile-recover on the still-full disk: one line, exit 1, nothing lost; with room, it closes the run
-    from runstore.recover import main as recover_main
-    rec = subprocess.run([sys.executable, "-c", "from runstore.recover import main; import sys; sys.exit(main())",
+    from tactile_flow.runstore.recover import main as recover_main
+    rec = subprocess.run([sys.executable, "-c", "from tactile_flow.runstore.recover import main; import sys; sys.exit(main())",
                           str(store)], capture_output=True, text=True, timeout=120)
     assert rec.returncode == 1 and "Traceback" not in rec.stderr and len(rec.stderr.strip().splitlines()) == 1
     assert "could not be written" in rec.stderr and "nothing was lost" in rec.stderr

@@ -15,10 +15,10 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.text import Annotation, Text
 
-from analysis import figures
-from analysis.config import load_config
-from analysis.load import load_run
-from analysis.pipeline import analyse, get_model
+from tactile_flow.analysis import figures
+from tactile_flow.analysis.config import load_config
+from tactile_flow.analysis.load import load_run
+from tactile_flow.analysis.pipeline import analyse, get_model
 
 pytestmark = pytest.mark.slow
 BIN = Path(sys.executable).parent

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from tactile import aggregate, flow, synthetic
-from tactile.pipeline import process_view
+from tactile_flow.tactile import aggregate, flow, synthetic
+from tactile_flow.tactile.pipeline import process_view
 
 RATE = 100.0
 
@@ -72,7 +72,7 @@ def test_static_flow_follows_slow_drift_after_reference(model):
 @pytest.mark.parametrize("method", ["dis", "tvl1"])
 def test_other_flow_methods_agree_on_direction(model, method):
     from dataclasses import replace
-    from tactile.pipeline import TactileModel
+    from tactile_flow.tactile.pipeline import TactileModel
     m = TactileModel(**{**model.__dict__, "config": replace(model.config, flow=flow.FlowConfig(method=method))})
     act = synthetic.moving_bump(model.taxels, start=(-8, 0, 0), velocity=(10, 0, 0), duration=1.6)
     found, _ = _sensor_direction(m, model.smooth(act))

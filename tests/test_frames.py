@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from tactile import _frame_kernels, frames, surface, synthetic
-from tactile.frames import View
+from tactile_flow.tactile import _frame_kernels, frames, surface, synthetic
+from tactile_flow.tactile.frames import View
 
 
 def test_mesh_covers_the_contact_half_evenly(model):

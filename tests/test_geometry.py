@@ -10,8 +10,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from tactile import disk_cache, geometry
-from tactile.geometry import (
+from tactile_flow.tactile import disk_cache, geometry
+from tactile_flow.tactile.geometry import (
     EllipsoidFit, cached_geodesic_distances, ellipsoid_angles, ellipsoid_normals,
     ellipsoid_points, fit_ellipsoid, geodesic_distances, geodesic_path, kernel_weights,
     load_taxels, project_to_ellipsoid, taxel_angles,

@@ -25,7 +25,13 @@ import xarray as xr
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 BIN = Path(sys.executable).parent
-PY_CLI = [sys.executable, "-c", "from protocols.cli import main; main()"]
+#: ``tactile-run`` from the copy of the tree in the working directory (``copy_tree``), as an editable
+#: install of that copy would run it: ``tactile_flow``'s subpackages are the copy's folders
+PY_CLI = [sys.executable, "-c",
+          "import importlib.util, sys; spec = importlib.util.spec_from_file_location('tactile_flow', "
+          "'tactile_flow/__init__.py', submodule_search_locations=['tactile_flow', '.']); "
+          "sys.modules['tactile_flow'] = tf = importlib.util.module_from_spec(spec); spec.loader.exec_module(tf); "
+          "from tactile_flow.protocols.cli import main; main()"]
 
 
 def guide(name: str) -> str:
@@ -143,7 +149,7 @@ def test_step_table_matches_the_code():
     proc = subprocess.run([sys.executable, "docs/protocol_tables.py", "--check"], cwd=ROOT, capture_output=True,
                           text=True)
     assert proc.returncode == 0, proc.stderr
-    from protocols.steps import STEP_KINDS
+    from tactile_flow.protocols.steps import STEP_KINDS
     table = guide("protocols.md").split("<!-- BEGIN steps -->")[1].split("<!-- END steps -->")[0]
     rows, kind = set(), None
     for line in table.splitlines():
@@ -239,7 +245,7 @@ def test_the_new_step_kind_plans_runs_and_enters_the_table(tmp_path):
 
 
 def test_surface_keys_table_lists_every_config_key():
-    from hardware.surfaces import KINDS, SurfaceConfig
+    from tactile_flow.hardware.surfaces import KINDS, SurfaceConfig
     text = guide("surfaces.md")
     table = text.split("## The keys (`SurfaceConfig`)")[1].split("\n\n")[1]
     keys = {line.split("`")[1] for line in table.splitlines()[2:]}
@@ -329,7 +335,7 @@ def test_first_session_search_path_of_two_directories(tmp_path):
 
 
 def test_first_session_interlock_table_matches_the_code():
-    from protocols.interlocks import SafetyConfig
+    from tactile_flow.protocols.interlocks import SafetyConfig
     rows = re.findall(r"^\| `safety\.(\w+)` \| ([^|]+) \|", guide(FIRST), re.M)
     assert {k for k, _ in rows} == {f.name for f in dataclasses.fields(SafetyConfig)}
     defaults = SafetyConfig()

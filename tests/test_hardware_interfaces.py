@@ -5,13 +5,13 @@ import threading
 import numpy as np
 import pytest
 
-from hardware.arm import Arm
-from hardware.biotac import TactileSensors
-from hardware.device import Clock, DeviceIdentity, WallClock
-from hardware.errors import DeviceError, NotConnectedError
-from hardware.hand import JOINT_NAMES, Hand
-from hardware.pour import Pump, Scale
-from hardware.sim import make_sim_lab
+from tactile_flow.hardware.arm import Arm
+from tactile_flow.hardware.biotac import TactileSensors
+from tactile_flow.hardware.device import Clock, DeviceIdentity, WallClock
+from tactile_flow.hardware.errors import DeviceError, NotConnectedError
+from tactile_flow.hardware.hand import JOINT_NAMES, Hand
+from tactile_flow.hardware.pour import Pump, Scale
+from tactile_flow.hardware.sim import make_sim_lab
 
 
 def test_sim_devices_implement_the_interfaces_and_report_identity():
@@ -91,12 +91,12 @@ def test_only_the_driver_thread_advances_simulated_time():
 
 # ------------------------------------------------------------------ every driver, real or simulated
 def _drivers():
-    from hardware.serial_biotac import SerialBiotacs
-    from hardware.serial_pour import SerialPump, SerialScale
-    from hardware.shadow import RosbridgeBiotacs, ShadowHand
-    from hardware.sim import SimArm, SimBiotac, SimHand, SimPump, SimScale, SimStage
-    from hardware.stage import ObjectStage
-    from hardware.ur10 import UR10Arm
+    from tactile_flow.hardware.serial_biotac import SerialBiotacs
+    from tactile_flow.hardware.serial_pour import SerialPump, SerialScale
+    from tactile_flow.hardware.shadow import RosbridgeBiotacs, ShadowHand
+    from tactile_flow.hardware.sim import SimArm, SimBiotac, SimHand, SimPump, SimScale, SimStage
+    from tactile_flow.hardware.stage import ObjectStage
+    from tactile_flow.hardware.ur10 import UR10Arm
     return [(UR10Arm, Arm), (SimArm, Arm), (ShadowHand, Hand), (SimHand, Hand),
             (RosbridgeBiotacs, TactileSensors), (SerialBiotacs, TactileSensors), (SimBiotac, TactileSensors),
             (SerialPump, Pump), (SimPump, Pump), (SerialScale, Scale), (SimScale, Scale), (SimStage, ObjectStage)]
@@ -151,8 +151,8 @@ def test_hand_stop_holds_every_joint_where_it_is():
 
 
 def test_connecting_a_lab_reports_every_failing_device_and_leaves_nothing_open(tmp_path):
-    from hardware.lab_container import Lab
-    from hardware.serial_pour import SerialPump, SerialPumpConfig, SerialScale, SerialScaleConfig
+    from tactile_flow.hardware.lab_container import Lab
+    from tactile_flow.hardware.serial_pour import SerialPump, SerialPumpConfig, SerialScale, SerialScaleConfig
 
     sim = make_sim_lab({})
     missing = tmp_path / "no-such-port"

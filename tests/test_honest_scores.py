@@ -7,8 +7,8 @@ import sys
 
 import pytest
 
-from analysis import labels as labelling
-from analysis.run import score_line
+from tactile_flow.analysis import labels as labelling
+from tactile_flow.analysis.run import score_line
 
 
 def test_generic_segments_carry_only_the_declared_labels():
@@ -36,7 +36,7 @@ def test_a_score_line_names_the_failed_targets_and_by_how_much():
 def test_a_protocol_of_ones_own_is_scored_on_nothing_it_does_not_declare(tmp_path):
     """A press on a bump: no sweep target, no undeclared `all` segment, no 'NOT met'."""
     proc = subprocess.run(
-        [sys.executable, "-c", "from protocols.cli import main; main()", "surface=bump", "protocol.name=press_bump",
+        [sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "surface=bump", "protocol.name=press_bump",
          "protocol.labels=[approach,contact,lift]",
          "protocol.steps=[{move_to: {at: feature_0, height: 5}}, {approach: {depth: 1.0}}, {hold: {duration: 1.0}},"
          " {lift: {height: 10}}]", "progress=false", "analysis.progress=false", "analysis.figures=false"],

@@ -10,10 +10,10 @@ from hydra import compose, initialize_config_dir
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hardware.errors import ConfigError
-from protocols.plan import make_plan
-from protocols.schema import register
-from protocols.steps import STEP_KINDS, ProtocolError
+from tactile_flow.hardware.errors import ConfigError
+from tactile_flow.protocols.plan import make_plan
+from tactile_flow.protocols.schema import register
+from tactile_flow.protocols.steps import STEP_KINDS, ProtocolError
 
 register()
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
@@ -59,7 +59,7 @@ def test_malformed_protocols_are_rejected_or_stay_within_limits(items):
 
 
 def _cli(tmp_path, *args):
-    return subprocess.run([sys.executable, "-c", "from protocols.cli import main; main()", "analyze=false",
+    return subprocess.run([sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "analyze=false",
                            "progress=false", *args], cwd=tmp_path, capture_output=True, text=True, timeout=120)
 
 

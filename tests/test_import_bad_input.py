@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from omegaconf import OmegaConf
 
-from importers import ImportInputError, ImportSettings, import_source
-from importers import writer as writer_mod
-from importers.cli import BAD_INPUT, FAILED, run
+from tactile_flow.importers import ImportInputError, ImportSettings, import_source
+from tactile_flow.importers import writer as writer_mod
+from tactile_flow.importers.cli import BAD_INPUT, FAILED, run
 from conftest import DATA
 
 CONF = Path(__file__).resolve().parents[1] / "conf" / "import.yaml"
@@ -167,7 +167,7 @@ def test_cli_run_exit_codes_and_one_line(tmp_path, capsys):
 
 
 def test_cli_process_nonexistent_source(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "importers.cli", f"source={tmp_path / 'missing.csv'}"],
+    r = subprocess.run([sys.executable, "-m", "tactile_flow.importers.cli", f"source={tmp_path / 'missing.csv'}"],
                        cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert r.returncode == BAD_INPUT
     assert r.stderr.strip().count("\n") == 0 and "missing.csv: no such file" in r.stderr
@@ -175,7 +175,7 @@ def test_cli_process_nonexistent_source(tmp_path):
 
 
 def test_cli_process_imports_the_real_bag(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "importers.cli", f"source={BAG}", "out=imp"],
+    r = subprocess.run([sys.executable, "-m", "tactile_flow.importers.cli", f"source={BAG}", "out=imp"],
                        cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     assert "977 frames" in r.stdout and "dropped rf" in r.stdout

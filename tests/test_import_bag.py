@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from importers import ImportSettings, import_source, read_bag
-from importers.bag import MSGTYPE, biotac_typestore
-from analysis.run import analyze_run
+from tactile_flow.importers import ImportSettings, import_source, read_bag
+from tactile_flow.importers.bag import MSGTYPE, biotac_typestore
+from tactile_flow.analysis.run import analyze_run
 from conftest import DATA
 
 BAG = DATA / "biotac_rest_untouched.bag"
@@ -65,7 +65,7 @@ def test_real_bag_provenance_names_source_and_checksum(imported):
     dt = xr.open_datatree(imported.store, engine="zarr")
     prov = dt.attrs["provenance"]
     assert prov["source"]["sha256"] == sha and prov["source"]["path"] == str(BAG.resolve())
-    assert prov["importer"]["reader"] == "importers.bag.read_bag"
+    assert prov["importer"]["reader"] == "tactile_flow.importers.bag.read_bag"
     assert prov["protocol"] == "import" and prov["source"]["format"] == "rosbag1"
     run_json = json.loads((Path(imported.run_dir) / "run.json").read_text())
     assert run_json["status"] == "success" and run_json["source"]["sha256"] == sha

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from importers import ImportSettings, import_source, read_bag, select_fingers
-from tactile.signals import SensorCalibration
-from analysis.run import analyze_run
+from tactile_flow.importers import ImportSettings, import_source, read_bag, select_fingers
+from tactile_flow.tactile.signals import SensorCalibration
+from tactile_flow.analysis.run import analyze_run
 from conftest import DATA
 
 BAG = DATA / "biotac_rest_untouched.bag"
@@ -66,7 +66,7 @@ def test_per_finger_prefixes_with_time_column(rest, tmp_path):
     np.testing.assert_array_equal(b["seq"].values, np.arange(rest.n_frames))
     assert dt["biotac_pac"].sizes["time_pac"] == 0
     assert dt.attrs["import"]["reader"]["rate_source"] == "time column"
-    assert dt.attrs["provenance"]["importer"]["reader"] == "importers.csv.read_csv"
+    assert dt.attrs["provenance"]["importer"]["reader"] == "tactile_flow.importers.csv.read_csv"
 
 
 def test_electrode_only_file_with_rate(rest, tmp_path):
@@ -145,7 +145,7 @@ def test_single_sensor_calibration_file(rest, tmp_path):
 def test_recording_that_starts_in_contact_keeps_its_pressure_with_a_stored_calibration(rest, tmp_path):
     """The analysis takes an import's stored baseline, not the record's own first samples: a
     record pressed from its first frame to its last still shows its contact."""
-    from analysis import run as analysis_run
+    from tactile_flow.analysis import run as analysis_run
 
     pressed = replace(rest, electrodes=rest.electrodes.copy())
     pressed.electrodes[:, 1, 18:24] -= 400                     # mf's pad pressed throughout

@@ -18,11 +18,11 @@ import pytest
 import xarray as xr
 from omegaconf import OmegaConf
 
-from importers import ImportInputError, ImportSettings, import_source, read_bag
-from importers import importer as importer_mod
-from importers.bag import BIOTAC_MSGS, MSGTYPE, TOPIC
-from importers.cli import BAD_INPUT, run
-from importers.recording import median_of, order_statistics
+from tactile_flow.importers import ImportInputError, ImportSettings, import_source, read_bag
+from tactile_flow.importers import importer as importer_mod
+from tactile_flow.importers.bag import BIOTAC_MSGS, MSGTYPE, TOPIC
+from tactile_flow.importers.cli import BAD_INPUT, run
+from tactile_flow.importers.recording import median_of, order_statistics
 from conftest import DATA
 
 BAG = DATA / "biotac_rest_untouched.bag"
@@ -31,7 +31,7 @@ CONF = Path(__file__).resolve().parents[1] / "conf" / "import.yaml"
 
 # ----------------------------------------------------------------------------- helpers
 def cli(cwd: Path, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "importers.cli", *args], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "tactile_flow.importers.cli", *args], cwd=cwd,
                           capture_output=True, text=True, timeout=120)
 
 
@@ -410,7 +410,7 @@ def test_streamed_median_of_a_32k_record_matches_the_whole_array():
     """The rate of a long record, chunk by chunk, is the same float as from the whole array."""
     rng = np.random.default_rng(11)
     t = np.cumsum(rng.normal(0.01, 1e-5, 32_001))
-    from importers.recording import diffs, rate_of
+    from tactile_flow.importers.recording import diffs, rate_of
     got = rate_of(median_of(lambda: diffs(t[i:i + 1000] for i in range(0, len(t), 1000)), len(t) - 1))
     assert got == float(1.0 / np.median(np.diff(t)))
     assert struct.pack("<d", got) == struct.pack("<d", float(1.0 / np.median(np.diff(t))))

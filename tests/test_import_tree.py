@@ -14,12 +14,12 @@ import pytest
 import xarray as xr
 
 from conftest import DATA
-from importers import ImportInputError, ImportSettings, import_source, read_bag, select_fingers
-from importers.importer import ImportIncomplete
+from tactile_flow.importers import ImportInputError, ImportSettings, import_source, read_bag, select_fingers
+from tactile_flow.importers.importer import ImportIncomplete
 from test_import_csv import write_csv
 
-IMPORT = [sys.executable, "-c", "from importers.cli import main; main()"]
-ANALYZE = [sys.executable, "-c", "from analysis.cli import main; main()"]
+IMPORT = [sys.executable, "-c", "from tactile_flow.importers.cli import main; main()"]
+ANALYZE = [sys.executable, "-c", "from tactile_flow.analysis.cli import main; main()"]
 
 
 @pytest.fixture(scope="module")

@@ -6,11 +6,11 @@ from pathlib import Path
 import pytest
 from hydra import compose, initialize_config_dir
 
-from hardware.sim import make_sim_lab
-from protocols.engine import ABORTED, SUCCESS, RunEngine
-from protocols.plan import make_plan
+from tactile_flow.hardware.sim import make_sim_lab
+from tactile_flow.protocols.engine import ABORTED, SUCCESS, RunEngine
+from tactile_flow.protocols.plan import make_plan
 from conftest import EventLog
-from protocols.schema import register
+from tactile_flow.protocols.schema import register
 
 register()
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"

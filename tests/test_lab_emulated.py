@@ -18,12 +18,12 @@ from hydra import compose, initialize_config_dir
 
 pytest.importorskip("rtde_control")
 
-from hardware.emulators.rosbridge_server import RosbridgeEmulator  # noqa: E402
-from hardware.emulators.serial_devices import SerialDevicesEmulator  # noqa: E402
-from hardware.emulators.ur_controller import URControllerProcess  # noqa: E402
-from hardware.rosbridge import RosbridgeUnreachableError  # noqa: E402
-from protocols.run import run_protocol  # noqa: E402
-from protocols.schema import register  # noqa: E402
+from tactile_flow.hardware.emulators.rosbridge_server import RosbridgeEmulator  # noqa: E402
+from tactile_flow.hardware.emulators.serial_devices import SerialDevicesEmulator  # noqa: E402
+from tactile_flow.hardware.emulators.ur_controller import URControllerProcess  # noqa: E402
+from tactile_flow.hardware.rosbridge import RosbridgeUnreachableError  # noqa: E402
+from tactile_flow.protocols.run import run_protocol  # noqa: E402
+from tactile_flow.protocols.schema import register  # noqa: E402
 
 register()
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
@@ -180,7 +180,7 @@ def test_a_rehearsal_on_tactile_emulate_presses_finds_segments_and_leaves_no_lin
     import sys
 
     links = tmp_path / "links"
-    emu = subprocess.Popen([sys.executable, "-c", "import sys; from hardware.emulators.cli import main; "
+    emu = subprocess.Popen([sys.executable, "-c", "import sys; from tactile_flow.hardware.emulators.cli import main; "
                             "sys.exit(main())", "--host", free_loopback(), "--rosbridge-port", "0",
                             "--link-dir", str(links)], stdout=subprocess.PIPE, text=True, cwd=tmp_path)
     try:
@@ -193,7 +193,7 @@ def test_a_rehearsal_on_tactile_emulate_presses_finds_segments_and_leaves_no_lin
         words = shlex.split(command)
         env = {**os.environ, **dict(w.split("=", 1) for w in words if w.startswith("TACTILE_EMULATE_DIR="))}
         args = [w for w in words if not w.startswith("TACTILE_EMULATE_DIR=")][1:]
-        run = subprocess.run([sys.executable, "-c", "from protocols.cli import main; main()", *args,
+        run = subprocess.run([sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", *args,
                               "progress=false", "analysis.progress=false", "analysis.figures=false",
                               "analysis.views=[bottom]"],
                              cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)

@@ -17,11 +17,11 @@ import pytest
 from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
-from analysis.cli import find_stores, quoted, run_specs, runs_as_jobs
-import cliapp.jobresults as jobresults
+from tactile_flow.analysis.cli import find_stores, quoted, run_specs, runs_as_jobs
+import tactile_flow.cliapp.jobresults as jobresults
 
-ANALYZE = "from analysis.cli import main; main()"
-RUN = "from protocols.cli import main; main()"
+ANALYZE = "from tactile_flow.analysis.cli import main; main()"
+RUN = "from tactile_flow.protocols.cli import main; main()"
 QUIET = ("analysis.progress=false", "analysis.figures=false")
 #: paths Hydra's override grammar would split or misread if they were not quoted
 NASTY = ["a b", "c,d", "e=f", "g'h", "i\\", "j\\'k", "[l]", "m\"n", "${o}"]

@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from tactile._lazy import lazy_import
+from tactile_flow.tactile._lazy import lazy_import
 
 
 @pytest.fixture

@@ -12,14 +12,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from long_record import make_store
 
-from analysis.chunking import ImpedanceReader, LazyActivation, smoother_reach, stretches
-from analysis.config import load_config
-from analysis.electrodes import StoredElectrodes
-from analysis.load import load_run
-from analysis.pipeline import analyse, get_model
-from analysis.preprocess import Envelope
+from tactile_flow.analysis.chunking import ImpedanceReader, LazyActivation, smoother_reach, stretches
+from tactile_flow.analysis.config import load_config
+from tactile_flow.analysis.electrodes import StoredElectrodes
+from tactile_flow.analysis.load import load_run
+from tactile_flow.analysis.pipeline import analyse, get_model
+from tactile_flow.analysis.preprocess import Envelope
 
-ANALYZE = [sys.executable, "-c", "from analysis.cli import main; main()"]
+ANALYZE = [sys.executable, "-c", "from tactile_flow.analysis.cli import main; main()"]
 WHOLE = {"progress": False, "figures": False, "memory": {"chunk_frames": 100_000, "noise_sample_frames": 100_000}}
 PIECES = {"progress": False, "figures": False, "memory": {"chunk_frames": 4_000, "noise_sample_frames": 100_000}}
 
@@ -84,7 +84,7 @@ def test_tactile_analyze_streams_a_long_record_and_says_so_in_the_summary(long_s
 
 def test_the_smoothers_reach_covers_their_memory():
     """Past the reach, a step at a stretch's edge has faded below float64's last bit."""
-    from tactile import signals
+    from tactile_flow.tactile import signals
     R, Q = 0.005, 0.00015
     reach = smoother_reach(R, Q, 5, 5)
     z = np.zeros(4 * reach)

@@ -12,11 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hardware.device import WallClock
-from hardware.streams import Column, Coord, Stream, device_time
-from protocols.recorder import Recorder
-from runstore import RunStore, open_run
-from runstore.recover import recover
+from tactile_flow.hardware.device import WallClock
+from tactile_flow.hardware.streams import Column, Coord, Stream, device_time
+from tactile_flow.protocols.recorder import Recorder
+from tactile_flow.runstore import RunStore, open_run
+from tactile_flow.runstore.recover import recover
 
 PROBES = ("inlet", "outlet", "ambient")
 

@@ -6,9 +6,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from tactile import signals, synthetic
-from tactile.online import AGGREGATES, OnlineFlow
-from tactile.pipeline import TactileConfig, TactileModel, process_view
+from tactile_flow.tactile import signals, synthetic
+from tactile_flow.tactile.online import AGGREGATES, OnlineFlow
+from tactile_flow.tactile.pipeline import TactileConfig, TactileModel, process_view
 
 FINGERS = ("ff", "mf", "th")
 REST = 20
@@ -100,7 +100,7 @@ def test_a_subset_of_views_in_another_order(model, record):
 
 
 def test_other_flow_methods_match_offline(model, record):
-    from tactile.flow import FlowConfig
+    from tactile_flow.tactile.flow import FlowConfig
     counts, baseline = record
     dis = replace(model, config=replace(model.config, flow=FlowConfig(method="dis", dis_preset=0)))
     online = OnlineFlow(dis, baseline[:1], FINGERS[:1], views=("bottom",))
@@ -273,8 +273,8 @@ def test_memory_stays_flat_over_many_pushes(model, record):
 
 def test_simulated_sweep_matches_offline(model):
     """A short simulated straws sweep (hardware.sim): the device's own seq, time and int16 counts."""
-    from hardware.sim import make_sim_lab
-    from hardware.sim.scenarios import biotac_arrays, straws_sweep
+    from tactile_flow.hardware.sim import make_sim_lab
+    from tactile_flow.hardware.sim.scenarios import biotac_arrays, straws_sweep
 
     lab = make_sim_lab({"seed": 3, "fingers": ["ff", "mf"]}, {"kind": "straws", "count": 2, "spacing_mm": 15.0})
     with lab:

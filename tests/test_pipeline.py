@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from tactile import aggregate, signals, synthetic
-from tactile.pipeline import TactileConfig, TactileModel, activation_from_counts, process_view
+from tactile_flow.tactile import aggregate, signals, synthetic
+from tactile_flow.tactile.pipeline import TactileConfig, TactileModel, activation_from_counts, process_view
 
 
 def _counts_from_activation(activation, baseline_counts):
@@ -72,7 +72,7 @@ def test_flow_aggregated_a_stretch_at_a_time_is_the_flow_aggregated_whole(model,
     aggregates are those of the whole window, bit for bit, across the stretches' seams."""
     import dataclasses
 
-    import tactile.pipeline as tp
+    import tactile_flow.tactile.pipeline as tp
     act = np.clip(np.cumsum(rng.normal(0, 0.05, (300, 24)), axis=0), 0, None)
     refs = {"unloaded": None, "contact_onset": 40}
     whole = process_view(model, act, "bottom", references=refs, keep_fields=True)

@@ -10,12 +10,12 @@ import pytest
 import xarray as xr
 from hydra import compose, initialize_config_dir
 
-from hardware.errors import ConfigError
-from protocols.backends import check_hardware
-from protocols.plan import make_plan
-from protocols.run import run_protocol
-from protocols.schema import register
-from protocols.steps import ProtocolError
+from tactile_flow.hardware.errors import ConfigError
+from tactile_flow.protocols.backends import check_hardware
+from tactile_flow.protocols.plan import make_plan
+from tactile_flow.protocols.run import run_protocol
+from tactile_flow.protocols.schema import register
+from tactile_flow.protocols.steps import ProtocolError
 
 register()
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
@@ -112,7 +112,7 @@ def test_explicit_grasp_joints_run_on_the_simulated_lab(tmp_path):
 @pytest.mark.slow
 def test_a_bad_hardware_value_is_one_line_naming_its_key_even_with_plan_only(tmp_path):
     for extra in ([], ["plan_only=true"]):
-        proc = subprocess.run([sys.executable, "-c", "from protocols.cli import main; main()", "analyze=false",
+        proc = subprocess.run([sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "analyze=false",
                                "progress=false", "hardware.seed=-5", *extra], cwd=tmp_path, capture_output=True,
                               text=True, timeout=120)
         lines = [line for line in proc.stderr.splitlines() if line.strip()]

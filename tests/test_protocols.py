@@ -7,12 +7,12 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from hardware.sim import make_sim_lab
-from protocols.engine import ABORTED, FAILED, SUCCESS, RunEngine
-from protocols.plan import format_timeline, make_plan
+from tactile_flow.hardware.sim import make_sim_lab
+from tactile_flow.protocols.engine import ABORTED, FAILED, SUCCESS, RunEngine
+from tactile_flow.protocols.plan import format_timeline, make_plan
 from conftest import EventLog
-from protocols.schema import register
-from protocols.steps import ProtocolError, parse_steps
+from tactile_flow.protocols.schema import register
+from tactile_flow.protocols.steps import ProtocolError, parse_steps
 
 
 register()
@@ -157,7 +157,7 @@ def test_operator_stop_retracts_and_aborts():
 
 
 def test_parallel_launchers_are_refused_for_real_hardware():
-    from protocols.cli import _refuse_parallel_hardware
+    from tactile_flow.protocols.cli import _refuse_parallel_hardware
     hc = OmegaConf.create({"launcher": {"_target_": "hydra_plugins.hydra_joblib_launcher.JoblibLauncher"}})
     lab = OmegaConf.create({"hardware": {"backend": "lab"}})
     with pytest.raises(ValueError, match="one robot"):

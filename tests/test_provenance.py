@@ -7,9 +7,9 @@ import threading
 import numpy as np
 import pytest
 
-from hardware.sim import make_sim_lab
-from runstore.provenance import collect, git_state, summary, write_run_json
-from protocols.store import RunStore, open_run
+from tactile_flow.hardware.sim import make_sim_lab
+from tactile_flow.runstore.provenance import collect, git_state, summary, write_run_json
+from tactile_flow.protocols.store import RunStore, open_run
 
 CONFIG = "protocol:\n  name: straws_sweep\n  sweep_speed: 10.0\nhardware:\n  backend: sim\n  seed: 3\n"
 

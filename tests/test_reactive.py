@@ -12,10 +12,10 @@ import pytest
 import xarray as xr
 from hydra import compose, initialize_config_dir
 
-from protocols.plan import make_plan
-from protocols.run import live_setup, run_protocol
-from protocols.schema import register
-from protocols.steps import Criterion, ProtocolError
+from tactile_flow.protocols.plan import make_plan
+from tactile_flow.protocols.run import live_setup, run_protocol
+from tactile_flow.protocols.schema import register
+from tactile_flow.protocols.steps import Criterion, ProtocolError
 from conftest import DATA
 
 register()
@@ -76,7 +76,7 @@ def test_live_monitor_is_only_built_when_needed():
                                            ("live.slip.release_drop=-0.2", "live")])
 def test_bad_live_settings_are_refused_by_key(override, key):
     """(Unknown keys never get this far: the run config's schema refuses them at composition.)"""
-    from hardware.errors import ConfigError
+    from tactile_flow.hardware.errors import ConfigError
     cfg = _cfg("protocol=pour_grasp_reactive", override)
     with pytest.raises(ConfigError) as err:
         live_setup(cfg, make_plan(cfg))
@@ -163,11 +163,11 @@ BAG = DATA / "biotac_rest_untouched.bag"
 def test_no_false_alarm_on_the_resting_recording(model):
     from dataclasses import replace
 
-    from importers.bag import read_bag
-    from importers.recording import select_fingers
-    from protocols.live import replay
-    from tactile import signals
-    from tactile.pipeline import TactileModel
+    from tactile_flow.importers.bag import read_bag
+    from tactile_flow.importers.recording import select_fingers
+    from tactile_flow.protocols.live import replay
+    from tactile_flow.tactile import signals
+    from tactile_flow.tactile.pipeline import TactileModel
 
     rec, _ = select_fingers(read_bag(BAG))
     online = TactileModel.build(replace(model.config, smooth=False))
@@ -208,9 +208,9 @@ def test_corrupt_and_missing_frames_are_skipped_and_counted_never_taken_for_slip
 
 
 def test_the_operator_line_shows_each_finger_and_the_slip_state():
-    from hardware.sim import make_sim_lab
-    from protocols.live import LiveConfig, LiveMonitor, tactile_config
-    from tactile.pipeline import TactileModel
+    from tactile_flow.hardware.sim import make_sim_lab
+    from tactile_flow.protocols.live import LiveConfig, LiveMonitor, tactile_config
+    from tactile_flow.tactile.pipeline import TactileModel
 
     class Rec:
         t0 = 0.0
@@ -239,7 +239,7 @@ def test_the_operator_line_shows_each_finger_and_the_slip_state():
 
 
 def test_the_analysis_dates_the_slip_labels_the_held_grasp_and_marks_the_reaction(pours):
-    from analysis.run import analyze_run
+    from tactile_flow.analysis.run import analyze_run
 
     store = pours["stores"]["pour_grasp_reactive"]
     summary = analyze_run(store, {"progress": False, "max_segment_figures": 0}, console=lambda *a: None)
@@ -251,9 +251,9 @@ def test_the_analysis_dates_the_slip_labels_the_held_grasp_and_marks_the_reactio
 
 
 def test_a_restarted_frame_counter_restarts_the_online_flow_instead_of_blinding_it():
-    from hardware.biotac import BiotacFrame, FrameTap
-    from protocols.live import RESTART_FRAMES, LiveConfig, LiveMonitor, tactile_config
-    from tactile.pipeline import TactileModel
+    from tactile_flow.hardware.biotac import BiotacFrame, FrameTap
+    from tactile_flow.protocols.live import RESTART_FRAMES, LiveConfig, LiveMonitor, tactile_config
+    from tactile_flow.tactile.pipeline import TactileModel
 
     class Biotac:                        # a sensor whose bridge reconnects mid-run
         fingers, rate_hz = ("ff",), 100.0

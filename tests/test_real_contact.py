@@ -13,16 +13,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.config import load_config
-from analysis.load import load_run
-from analysis.pipeline import analyse
-from analysis.preprocess import despike
-from analysis.run import analyze_run
-from analysis.slip import CLASSES
-from importers import ImportSettings, import_source, read_bag, select_fingers
-from tactile import aggregate as tagg
-from tactile import contact, signals
-from tactile.pipeline import TactileConfig, TactileModel, process_view
+from tactile_flow.analysis.config import load_config
+from tactile_flow.analysis.load import load_run
+from tactile_flow.analysis.pipeline import analyse
+from tactile_flow.analysis.preprocess import despike
+from tactile_flow.analysis.run import analyze_run
+from tactile_flow.analysis.slip import CLASSES
+from tactile_flow.importers import ImportSettings, import_source, read_bag, select_fingers
+from tactile_flow.tactile import aggregate as tagg
+from tactile_flow.tactile import contact, signals
+from tactile_flow.tactile.pipeline import TactileConfig, TactileModel, process_view
 
 DATA = Path(__file__).resolve().parent / "data"
 GRASPS = sorted((DATA / "biotac_sp_grasps").glob("*.csv"))
@@ -243,7 +243,7 @@ def pressed_store(rest, tmp_path_factory):
 
 
 def test_shuffled_time_axis_is_refused(pressed_store, tmp_path):
-    from analysis.load import AnalysisInputError
+    from tactile_flow.analysis.load import AnalysisInputError
 
     def shuffle(d):
         b = d["/biotac"]

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from hardware.biotac import BiotacFrame
-from hardware.device import WallClock
-from hardware.sim import make_sim_lab
-from hardware.sim.scenarios import pad_height_pose
-from runstore.clockmodel import (OnlineClockModel, fit_envelope, sequence_gaps, window_minima)
-from protocols.recorder import Recorder
-from protocols.store import RunStore, open_run
+from tactile_flow.hardware.biotac import BiotacFrame
+from tactile_flow.hardware.device import WallClock
+from tactile_flow.hardware.sim import make_sim_lab
+from tactile_flow.hardware.sim.scenarios import pad_height_pose
+from tactile_flow.runstore.clockmodel import (OnlineClockModel, fit_envelope, sequence_gaps, window_minima)
+from tactile_flow.protocols.recorder import Recorder
+from tactile_flow.protocols.store import RunStore, open_run
 
 
 def sources(lab):
@@ -200,9 +200,9 @@ def test_exception_in_the_context_closes_the_store_as_failed(tmp_path):
 CHILD = textwrap.dedent("""
     import sys, time
     import numpy as np
-    from hardware.sim import make_sim_lab
-    from protocols.store import RunStore
-    from protocols.recorder import Recorder
+    from tactile_flow.hardware.sim import make_sim_lab
+    from tactile_flow.protocols.store import RunStore
+    from tactile_flow.protocols.recorder import Recorder
 
     lab = make_sim_lab({"seed": 9, "realtime": True}, {"kind": "straws"})
     with lab:

@@ -11,8 +11,8 @@ import pytest
 import xarray as xr
 import zarr
 
-from runstore.recover import main, recover
-from protocols.store import RunStore
+from tactile_flow.runstore.recover import main, recover
+from tactile_flow.protocols.store import RunStore
 
 from test_store import F, arm_rows, biotac_rows
 
@@ -54,7 +54,7 @@ def test_not_a_run_store_is_a_clear_error(tmp_path, capsys):
 INTERRUPTED_AT = """
 import os, signal, sys
 import zarr
-from runstore import recover
+from tactile_flow.runstore import recover
 
 step, sig = sys.argv[2], int(sys.argv[3])
 target = {"trim": zarr.Array, "close": zarr.Group, "run_json": recover}[step]

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from runstore import RunStore
-from runstore.labelled import Dataset, Variable, to_xarray, write_tree
+from tactile_flow.runstore import RunStore
+from tactile_flow.runstore.labelled import Dataset, Variable, to_xarray, write_tree
 from test_store import biotac_rows
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -92,7 +92,7 @@ def _store(path: Path) -> Path:
 
 
 def test_the_analysis_refuses_a_store_of_a_newer_major_schema_version(tmp_path):
-    from analysis.load import AnalysisInputError, load_run
+    from tactile_flow.analysis.load import AnalysisInputError, load_run
     store = _store(tmp_path / "run.zarr")
     meta = json.loads((store / "zarr.json").read_text())
     meta["attributes"]["schema_version"] = "2.0"
@@ -107,8 +107,8 @@ def test_writing_an_analysis_and_reading_its_run_import_no_xarray(tmp_path):
     store = _store(tmp_path / "run.zarr")
     code = ("import sys\n"
             "from pathlib import Path\n"
-            "from runstore.labelled import Dataset, Variable, write_tree\n"
-            "from analysis.load import load_run\n"
+            "from tactile_flow.runstore.labelled import Dataset, Variable, write_tree\n"
+            "from tactile_flow.analysis.load import load_run\n"
             f"run = load_run({str(store)!r})\n"
             "tree = {'/x': Dataset({'t': Variable(('time',), run.time)})}\n"
             f"write_tree(tree, Path({str(tmp_path / 'analysis.zarr')!r}))\n"

@@ -7,12 +7,12 @@ import time
 import numpy as np
 import pytest
 
-from hardware.emulators.rosbridge_server import RosbridgeEmulator
-from hardware.errors import (ConfigError, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
+from tactile_flow.hardware.emulators.rosbridge_server import RosbridgeEmulator
+from tactile_flow.hardware.errors import (ConfigError, DeviceDisconnectedError, DeviceFaultError, DeviceTimeoutError,
                              NotConnectedError, SafetyError)
-from hardware.hand import JOINT_NAMES
-from hardware.rosbridge import RosbridgeConfig, RosbridgeUnreachableError
-from hardware.shadow import RosbridgeBiotacConfig, RosbridgeBiotacs, ShadowHand, ShadowHandConfig
+from tactile_flow.hardware.hand import JOINT_NAMES
+from tactile_flow.hardware.rosbridge import RosbridgeConfig, RosbridgeUnreachableError
+from tactile_flow.hardware.shadow import RosbridgeBiotacConfig, RosbridgeBiotacs, ShadowHand, ShadowHandConfig
 
 
 @pytest.fixture(scope="module")

@@ -15,12 +15,12 @@ import pytest
 import xarray as xr
 
 from conftest import tmpfs
-from runstore import rundir
-from protocols.interrupts import Interrupts
-from runstore.recover import main as recover_main
+from tactile_flow.runstore import rundir
+from tactile_flow.protocols.interrupts import Interrupts
+from tactile_flow.runstore.recover import main as recover_main
 
 ROOT = Path(__file__).resolve().parents[1]
-RUN = [sys.executable, "-c", "from protocols.cli import main; main()", "progress=false"]
+RUN = [sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "progress=false"]
 QUIET = ["analyze=false", "progress=false"]
 
 
@@ -152,7 +152,7 @@ def test_a_ctrl_c_a_finaliser_dropped_outside_the_motion_is_delivered_again(caps
     import sys
     import weakref
 
-    from cliapp.runner import _unraisable
+    from tactile_flow.cliapp.runner import _unraisable
 
     class Thing:
         pass
@@ -192,7 +192,7 @@ def test_a_ctrl_c_a_finaliser_dropped_outside_the_motion_is_delivered_again(caps
 
 HALF_BUILT = """
 import os, signal, sys
-from cliapp.runner import run_app
+from tactile_flow.cliapp.runner import run_app
 
 class HalfBuilt:                        # as zipfile.ZipFile: __del__ needs what __init__ sets last
     def __init__(self, sig):
@@ -212,10 +212,10 @@ run_app(app, argv=[])
 """
 
 
-COMMAND_ARGS = {"protocols.entry": ["progress=false"], "analysis.entry": ["run=run/run.zarr"],
-                "importers.entry": [f"source={ROOT / 'tests' / 'data' / 'biotac_rest_untouched.bag'}", "out=imported"],
-                "cliapp.startup": ["run/run.zarr"]}
-ENTRY_FUNCTION = {"cliapp.startup": "tactile_recover"}               # the others: main
+COMMAND_ARGS = {"tactile_flow.protocols.entry": ["progress=false"], "tactile_flow.analysis.entry": ["run=run/run.zarr"],
+                "tactile_flow.importers.entry": [f"source={ROOT / 'tests' / 'data' / 'biotac_rest_untouched.bag'}", "out=imported"],
+                "tactile_flow.cliapp.startup": ["run/run.zarr"]}
+ENTRY_FUNCTION = {"tactile_flow.cliapp.startup": "tactile_recover"}               # the others: main
 
 
 @pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="reads /proc (Linux)")
@@ -255,7 +255,7 @@ def test_an_object_a_signal_left_half_built_adds_nothing_to_the_one_line(sig):
 
 CLEANUP_RAISES = """
 import os, signal, sys, time
-from cliapp.runner import run_app
+from tactile_flow.cliapp.runner import run_app
 
 def app():                              # as omegaconf while Hydra composes a config
     try:
@@ -327,7 +327,7 @@ def recorded(tmp_path_factory):
 def test_tactile_analyze_interrupted_says_so_and_leaves_nothing_partial(recorded, sig, moment):
     """A signal while the analysis computes (as soon as it holds the run directory) or while
     it writes its staging directory: one line, exit 3, nothing partial left behind."""
-    proc = subprocess.Popen([sys.executable, "-c", "from analysis.cli import main; main()", f"run={recorded}",
+    proc = subprocess.Popen([sys.executable, "-c", "from tactile_flow.analysis.cli import main; main()", f"run={recorded}",
                              "analysis.progress=false"],
                             cwd=recorded.parent, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     if moment == "computing":
@@ -343,10 +343,10 @@ def test_tactile_analyze_interrupted_says_so_and_leaves_nothing_partial(recorded
 
 SWALLOWED = """
 import os, signal, sys
-import tactile.flow
-from analysis.cli import main
+import tactile_flow.tactile.flow
+from tactile_flow.analysis.cli import main
 
-build, sig = tactile.flow.FlowEstimator.__init__, int(sys.argv[2])
+build, sig = tactile_flow.tactile.flow.FlowEstimator.__init__, int(sys.argv[2])
 
 def build_swallowing_a_ctrl_c(self, *args, **kwargs):   # as OpenCV's loader, which ``import cv2`` runs here
     try:
@@ -355,7 +355,7 @@ def build_swallowing_a_ctrl_c(self, *args, **kwargs):   # as OpenCV's loader, wh
         pass
     build(self, *args, **kwargs)
 
-tactile.flow.FlowEstimator.__init__ = build_swallowing_a_ctrl_c
+tactile_flow.tactile.flow.FlowEstimator.__init__ = build_swallowing_a_ctrl_c
 sys.argv = ["tactile-analyze", f"run={sys.argv[1]}", "analysis.progress=false"]
 main()
 """
@@ -388,7 +388,7 @@ def test_ctrl_c_at_any_moment_of_tactile_analyze_is_the_interrupt_or_a_whole_ana
         shutil.copytree(recorded.parent, run)
         before = sorted(p.name for p in run.iterdir())
         t0 = time.monotonic()
-        proc = subprocess.Popen([sys.executable, "-c", "from analysis.entry import main; main()",
+        proc = subprocess.Popen([sys.executable, "-c", "from tactile_flow.analysis.entry import main; main()",
                                  f"run={run / 'run.zarr'}", "analysis.progress=false"],
                                 cwd=run, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         if at is not None:
@@ -430,7 +430,7 @@ def test_recover_refuses_a_run_that_is_still_recording(tmp_path):
     store = tmp_path / "run" / "run.zarr"
     wait_for(lambda: store.exists() or proc.poll() is not None)
     time.sleep(1.0)
-    rec = subprocess.run([sys.executable, "-c", "from runstore.recover import main; import sys; sys.exit(main())",
+    rec = subprocess.run([sys.executable, "-c", "from tactile_flow.runstore.recover import main; import sys; sys.exit(main())",
                           str(store)], capture_output=True, text=True, timeout=60)
     assert rec.returncode == 2 and f"pid {proc.pid}" in rec.stderr and "in use" in rec.stderr, rec.stderr
     assert xr.open_datatree(store, engine="zarr").attrs["status"] == "running"
@@ -484,7 +484,7 @@ def test_a_zarr_write_cut_by_ctrl_c_is_settled_before_its_directory_is_removed(t
     import zarr
     from zarr.core.sync import sync
 
-    from runstore import inflight
+    from tactile_flow.runstore import inflight
 
     def interrupt(*_):
         raise KeyboardInterrupt

@@ -7,9 +7,9 @@ import time
 import numpy as np
 import pytest
 
-from hardware.emulators.serial_devices import SerialDevicesEmulator
-from hardware.errors import ConfigError, DeviceDisconnectedError, DeviceFaultError, NotConnectedError
-from hardware.serial_biotac import (HEADER_SIZE, FrameParser, SerialBiotacConfig, SerialBiotacs, crc16,
+from tactile_flow.hardware.emulators.serial_devices import SerialDevicesEmulator
+from tactile_flow.hardware.errors import ConfigError, DeviceDisconnectedError, DeviceFaultError, NotConnectedError
+from tactile_flow.hardware.serial_biotac import (HEADER_SIZE, FrameParser, SerialBiotacConfig, SerialBiotacs, crc16,
                                     encode_frame)
 
 FINGERS3 = ("ff", "mf", "th")

@@ -7,9 +7,9 @@ import time
 import numpy as np
 import pytest
 
-from hardware.emulators.serial_devices import SerialDevicesEmulator
-from hardware.errors import ConfigError, DeviceDisconnectedError, DeviceFaultError, NotConnectedError
-from hardware.serial_pour import (SerialPump, SerialPumpConfig, SerialScale, SerialScaleConfig, format_weight_line,
+from tactile_flow.hardware.emulators.serial_devices import SerialDevicesEmulator
+from tactile_flow.hardware.errors import ConfigError, DeviceDisconnectedError, DeviceFaultError, NotConnectedError
+from tactile_flow.hardware.serial_pour import (SerialPump, SerialPumpConfig, SerialScale, SerialScaleConfig, format_weight_line,
                                   parse_weight_line)
 
 

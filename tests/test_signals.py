@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tactile.signals import (
+from tactile_flow.tactile.signals import (
     SensorCalibration,
     activation,
     baseline_from_rest,
@@ -262,7 +262,7 @@ def test_running_median_is_scipys_median_filter_with_the_edges_repeated(seed, T,
     """The despiking median (numba) gives scipy's values exactly, ties and short records included."""
     from scipy.ndimage import median_filter
 
-    from tactile.signals import running_median
+    from tactile_flow.tactile.signals import running_median
     x = np.random.default_rng(seed).integers(0, 5, (T, 2, 3)).astype(float)     # many ties
     np.testing.assert_array_equal(running_median(x, frames),
                                   median_filter(x, size=(frames, 1, 1), mode="nearest"))

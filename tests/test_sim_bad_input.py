@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from hardware.errors import ConfigError, SafetyError, WorkspaceError
-from hardware.sim import make_sim_lab
+from tactile_flow.hardware.errors import ConfigError, SafetyError, WorkspaceError
+from tactile_flow.hardware.sim import make_sim_lab
 
 
 @pytest.mark.parametrize("surface, key", [

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hardware.sim.calibrate_contact import FINGERS, derive, read_grasps, unloaded_state
-from hardware.sim.contact_check import CALIBRATION, PRESS_FORCES, compare
+from tactile_flow.hardware.sim.calibrate_contact import FINGERS, derive, read_grasps, unloaded_state
+from tactile_flow.hardware.sim.contact_check import CALIBRATION, PRESS_FORCES, compare
 
 DATA = Path(__file__).parent / "data"
 GRASPS = DATA / "biotac_sp_grasps"
@@ -47,8 +47,8 @@ def test_the_shipped_calibration_is_what_the_script_derives_from_the_test_data(c
 def test_the_unloaded_estimate_finds_the_rest_of_a_sensor_at_rest():
     """On the real resting bag (every row unloaded) the estimator returns the rest level within
     its stated uncertainty plus the noise's upper tail (it takes a 90th percentile)."""
-    from importers.bag import read_bag
-    from importers.recording import select_fingers
+    from tactile_flow.importers.bag import read_bag
+    from tactile_flow.importers.recording import select_fingers
 
     rec, _ = select_fingers(read_bag(DATA / "biotac_rest_untouched.bag"))
     rng = np.random.default_rng(0)

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from hardware.sim import make_sim_lab
-from hardware.sim.scenarios import biotac_arrays, straws_sweep
+from tactile_flow.hardware.sim import make_sim_lab
+from tactile_flow.hardware.sim.scenarios import biotac_arrays, straws_sweep
 
 
 def _run(seed):

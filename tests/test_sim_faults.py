@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from hardware.errors import DeviceDisconnectedError, NotConnectedError, ProtectiveStopError
-from hardware.sim import make_sim_lab
-from hardware.sim.scenarios import biotac_arrays
+from tactile_flow.hardware.errors import DeviceDisconnectedError, NotConnectedError, ProtectiveStopError
+from tactile_flow.hardware.sim import make_sim_lab
+from tactile_flow.hardware.sim.scenarios import biotac_arrays
 
 
 def test_dropout_window_leaves_a_gap_and_a_seq_jump():

@@ -5,8 +5,8 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 from conftest import DATA
-from hardware.sim import make_sim_lab
-from hardware.sim.scenarios import biotac_arrays
+from tactile_flow.hardware.sim import make_sim_lab
+from tactile_flow.hardware.sim.scenarios import biotac_arrays
 
 BAG = DATA / "biotac_rest_untouched.bag"
 CONNECTED = {"ff": 0, "mf": 1, "th": 4}          # the bag's connected fingers (Shadow index)

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from hardware.sim import make_sim_lab
-from hardware.sim.scenarios import biotac_arrays, close_grasp, pour_until_slip
+from tactile_flow.hardware.sim import make_sim_lab
+from tactile_flow.hardware.sim.scenarios import biotac_arrays, close_grasp, pour_until_slip
 
 LOOSE = {"pour": {"grip_n_per_rad": 2.0}}
 
@@ -102,8 +102,8 @@ def test_slip_onset_leaves_a_tactile_trace_on_every_grasp_finger(pour):
 def test_bottle_rotation_turns_the_shear_pattern():
     """The skin under the pads turns with the bottle: the pressure pattern rotates (the thumb,
     facing the fingers, sees it mirrored)."""
-    from hardware.sim.config import load_config
-    from hardware.sim.world import SimWorld
+    from tactile_flow.hardware.sim.config import load_config
+    from tactile_flow.hardware.sim.world import SimWorld
     w = SimWorld(load_config({"seed": 0}), None)
     w.grasp.stretch_mm, w.grasp.shear_n = 0.8, 2.0
     _, _, a0 = w._grasp_patch(0.8, 0.0)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.signal import find_peaks
 
-from hardware.sim import make_sim_lab
-from hardware.sim.scenarios import biotac_arrays, straws_sweep
+from tactile_flow.hardware.sim import make_sim_lab
+from tactile_flow.hardware.sim.scenarios import biotac_arrays, straws_sweep
 
 # taxels a straw passes under at 1.5 mm depth, ahead of and behind the pad's centre
 PLUS_X = [20, 21, 22]          # taxels 21, 22, 23: x = 4.3..6.6 mm

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tactile.slip import CAUSES, SlipConfig, SlipDetector
+from tactile_flow.tactile.slip import CAUSES, SlipConfig, SlipDetector
 
 RATE = 100.0
 

@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from hardware.errors import SafetyError
-from hardware.sim import make_sim_lab
-from hardware.sim import skin
-from hardware.stage import ObjectStage
-from protocols.slip_grid import Condition, compose, conditions, run_slip_in_place
-from tactile.geometry import load_taxels
+from tactile_flow.hardware.errors import SafetyError
+from tactile_flow.hardware.sim import make_sim_lab
+from tactile_flow.hardware.sim import skin
+from tactile_flow.hardware.stage import ObjectStage
+from tactile_flow.protocols.slip_grid import Condition, compose, conditions, run_slip_in_place
+from tactile_flow.tactile.geometry import load_taxels
 
 BIN = Path(sys.executable).parent
 TAXELS = load_taxels()
@@ -293,16 +293,16 @@ def test_a_lab_without_a_stage_refuses_the_protocol_in_one_line(tmp_path):
     (["hardware.stage=null", "protocol.steps=[{slide:{}}]"], "protocol.steps[0].slide", "needs an object stage"),
 ])
 def test_bad_slip_protocols_are_refused_naming_the_key(overrides, key, words):
-    from protocols.plan import make_plan
-    from protocols.steps import ProtocolError
+    from tactile_flow.protocols.plan import make_plan
+    from tactile_flow.protocols.steps import ProtocolError
     with pytest.raises(ProtocolError) as err:
         make_plan(compose(Condition("translate"), overrides=overrides))
     assert err.value.key == key and words in str(err.value), str(err.value)
 
 
 def test_a_run_without_tare_refuses_the_live_monitor(tmp_path):
-    from protocols.run import run_protocol
-    from protocols.steps import ProtocolError
+    from tactile_flow.protocols.run import run_protocol
+    from tactile_flow.protocols.steps import ProtocolError
     cfg = compose(Condition("none", tare=False), overrides=["live.enabled=true", "analyze=false"])
     with pytest.raises(ProtocolError, match="live monitor needs a tare"):
         run_protocol(cfg, tmp_path / "run", console=lambda *a: None)
@@ -310,7 +310,7 @@ def test_a_run_without_tare_refuses_the_live_monitor(tmp_path):
 
 
 def test_a_calibration_file_is_stored_and_a_bad_one_refused(tmp_path):
-    from hardware.errors import ConfigError
+    from tactile_flow.hardware.errors import ConfigError
     cal = {f: {"sensor_id": f"SN-{f}", "source": "bench, 2026-11-23", "baseline_counts": [3000.0] * 24}
            for f in ("ff", "mf", "rf", "lf", "th")}
     path = tmp_path / "cal.json"
@@ -336,7 +336,7 @@ def test_the_analysis_reads_the_slip_and_meets_its_targets(cli_runs, kind, tare,
     (direction within 45°, rotation sense, touch vs slip, contact found), and nothing else scored."""
     import shutil
 
-    from analysis.run import analyze_run
+    from tactile_flow.analysis.run import analyze_run
     tree, _ = cli_runs[(kind, tare)]
     store = tmp_path / "run.zarr"
     shutil.copytree(tree.attrs["_store"], store)

@@ -16,10 +16,10 @@ from scipy import ndimage
 from scipy import signal as sps
 from scipy.spatial.transform import Rotation
 
-from analysis import segments as seg
-from analysis.signal1d import _savgol_coefficients, find_peaks, savgol_filter
-from hardware.transforms import matrix_to_rotvec, rotvec_to_matrix, rotvec_to_quaternion
-from tactile.aggregate import _eroded
+from tactile_flow.analysis import segments as seg
+from tactile_flow.analysis.signal1d import _savgol_coefficients, find_peaks, savgol_filter
+from tactile_flow.hardware.transforms import matrix_to_rotvec, rotvec_to_matrix, rotvec_to_quaternion
+from tactile_flow.tactile.aggregate import _eroded
 
 
 def scipy_peaks(x, prominence, distance):

@@ -13,8 +13,8 @@ import pytest
 import xarray as xr
 from hydra import compose, initialize_config_dir
 
-from protocols import run as run_module
-from protocols.schema import register
+from tactile_flow.protocols import run as run_module
+from tactile_flow.protocols.schema import register
 
 pytestmark = pytest.mark.soak
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"

@@ -7,9 +7,9 @@ import pytest
 import xarray as xr
 import zarr
 
-from hardware.biotac import FINGERS
-from hardware.hand import JOINT_NAMES
-from protocols.store import AXIS6, RunStore, open_run, run_schema
+from tactile_flow.hardware.biotac import FINGERS
+from tactile_flow.hardware.hand import JOINT_NAMES
+from tactile_flow.protocols.store import AXIS6, RunStore, open_run, run_schema
 
 F = len(FINGERS)
 

@@ -17,11 +17,11 @@ import pytest
 
 pytest.importorskip("rtde_control")
 
-from hardware.arm import Arm, Workspace  # noqa: E402
-from hardware.emulators import URControllerProcess  # noqa: E402
-from hardware.errors import (DeviceDisconnectedError, DeviceTimeoutError, ProtectiveStopError,  # noqa: E402
+from tactile_flow.hardware.arm import Arm, Workspace  # noqa: E402
+from tactile_flow.hardware.emulators import URControllerProcess  # noqa: E402
+from tactile_flow.hardware.errors import (DeviceDisconnectedError, DeviceTimeoutError, ProtectiveStopError,  # noqa: E402
                              SafetyError, WorkspaceError)
-from hardware.ur10 import UR10Arm, UR10Config  # noqa: E402
+from tactile_flow.hardware.ur10 import UR10Arm, UR10Config  # noqa: E402
 
 HOME = np.array([0.5, -0.2, 0.3, 0.0, np.pi, 0.0])
 SURFACE_Z, STIFFNESS = 0.2, 5000.0
@@ -287,7 +287,7 @@ def test_silent_controller_times_out_instead_of_hanging():
 
 
 def test_config_errors_name_the_key():
-    from hardware.errors import ConfigError
+    from tactile_flow.hardware.errors import ConfigError
     with pytest.raises(ConfigError, match="hardware.arm.max_speed_m_s"):
         UR10Config(max_speed_m_s=-1)
     with pytest.raises(ConfigError, match="hardware.arm.frobnicate"):

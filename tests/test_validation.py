@@ -9,12 +9,12 @@ from pathlib import Path
 import pytest
 from hydra import compose, initialize_config_dir
 
-from analysis.config import AnalysisConfigError, load_config as load_analysis
-from hardware.config import SimConfig, load_config as load_hardware
-from protocols.plan import make_plan
-from protocols.schema import check_config, register
-from protocols.steps import STEP_KINDS, Pour, ProtocolError, parse_steps
-from validation import ConfigError, build, spec, suggest, unknown_key
+from tactile_flow.analysis.config import AnalysisConfigError, load_config as load_analysis
+from tactile_flow.hardware.config import SimConfig, load_config as load_hardware
+from tactile_flow.protocols.plan import make_plan
+from tactile_flow.protocols.schema import check_config, register
+from tactile_flow.protocols.steps import STEP_KINDS, Pour, ProtocolError, parse_steps
+from tactile_flow.validation import ConfigError, build, spec, suggest, unknown_key
 
 register()
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
@@ -150,7 +150,7 @@ def _source(fn):
     ("protocol.steps.0.move_to.hieght=3", "expected one of at, height, margin, pose, speed; did you mean `height`?"),
 ])
 def test_tactile_run_refuses_a_misspelt_key_in_one_line(tmp_path, override, expected):
-    proc = subprocess.run([sys.executable, "-c", "from protocols.cli import main; main()", override], cwd=tmp_path,
+    proc = subprocess.run([sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", override], cwd=tmp_path,
                           capture_output=True, text=True, timeout=120)
     lines = [line for line in proc.stderr.splitlines() if line.strip()]
     assert proc.returncode == 2 and len(lines) == 1 and expected in lines[0], proc.stderr

@@ -20,15 +20,15 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from hardware.transforms import rotvec_to_quaternion
+from tactile_flow.hardware.transforms import rotvec_to_quaternion
 
 pytest.importorskip("rerun")
 pytest.importorskip("datafusion")
 
 from rerun.chunk import RrdReader  # noqa: E402
 
-from viewer import TIMELINE, draw  # noqa: E402
-from viewer.cli import main as tactile_view  # noqa: E402
+from tactile_flow.viewer import TIMELINE, draw  # noqa: E402
+from tactile_flow.viewer.cli import main as tactile_view  # noqa: E402
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 VIEWS = ("bottom", "left", "right")
@@ -74,15 +74,15 @@ def assert_on_timeline(rec: Recording, entity: str, times) -> None:
 def _cfg(*overrides):
     from hydra import compose, initialize_config_dir
 
-    from protocols.schema import register
+    from tactile_flow.protocols.schema import register
     register()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base=None):
         return compose("config", overrides=list(overrides))
 
 
 def _run_analyse_view(run_dir: Path, *overrides) -> dict:
-    from analysis.run import analyze_run
-    from protocols.run import run_protocol
+    from tactile_flow.analysis.run import analyze_run
+    from tactile_flow.protocols.run import run_protocol
     lines = []
     result = run_protocol(_cfg(*overrides, "progress=false", "analyze=false"), run_dir, console=lines.append)
     assert result.status == "success", result.error
@@ -164,10 +164,10 @@ def test_a_straws_sweep_replays_every_stream_on_the_run_timeline(straws):
     shown_flow = rec.values("/tactile/ff/bottom/flow", "Arrows2D:vectors")
     assert max(np.abs(np.array(shown_flow[j])).max() for j in range(k - 3, k + 4)) > 0.5
     # the frames and flow shown are the analysis' own, frame for frame
-    from analysis.config import load_config
-    from analysis.load import load_run
-    from analysis.pipeline import analyse
-    from viewer.scene import load_scene, tactile_tracks
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.load import load_run
+    from tactile_flow.analysis.pipeline import analyse
+    from tactile_flow.viewer.scene import load_scene, tactile_tracks
     scene = load_scene(straws["dir"])
     cfg = load_config({**scene.run.config["analysis"], "save_fields": True, "progress": False})
     (cf, *_) = [c for c in analyse(load_run(straws["dir"] / "run.zarr"), cfg).flows if c.finger == "ff"]
@@ -233,7 +233,7 @@ def test_web_serves_the_viewer_until_stopped(straws):
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    proc = subprocess.Popen([sys.executable, "-c", "import sys; from viewer.cli import main; sys.exit(main(sys.argv[1:]))",
+    proc = subprocess.Popen([sys.executable, "-c", "import sys; from tactile_flow.viewer.cli import main; sys.exit(main(sys.argv[1:]))",
                              str(straws["dir"]), "--web", "--port", str(port)], stdout=subprocess.PIPE, text=True)
     try:
         line = proc.stdout.readline()                          # printed once everything is sent
@@ -251,8 +251,8 @@ def test_web_serves_the_viewer_until_stopped(straws):
 def test_the_live_viewer_drops_and_counts_when_it_cannot_keep_up_and_never_blocks(model, tmp_path, rng):
     """Rows offered far faster than 100 Hz: the queue fills, what does not fit is dropped and
     counted, every offer returns at once, and offered = shown + dropped."""
-    from tactile.online import OnlineFlow
-    from viewer.live import QUEUE_ITEMS, LiveViewer
+    from tactile_flow.tactile.online import OnlineFlow
+    from tactile_flow.viewer.live import QUEUE_ITEMS, LiveViewer
     fingers = ("ff", "mf")
     flow = OnlineFlow(model, np.full((2, 24), 10.0), fingers, ("bottom",))
     for i in range(3):
@@ -286,7 +286,7 @@ def _rows(i, fingers):
 # ----------------------------------------------------------------------------- the command line
 
 def _cli(*args, env=None, pre=""):
-    code = f"{pre}import sys; from viewer.cli import main; sys.exit(main({list(args)!r}))"
+    code = f"{pre}import sys; from tactile_flow.viewer.cli import main; sys.exit(main({list(args)!r}))"
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
                           env={**os.environ, **(env or {})})
 
@@ -330,15 +330,15 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, args, words):
 def test_without_a_display_tactile_view_asks_for_web_or_save(tmp_path):
     (tmp_path / "run.zarr").mkdir()
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    r = subprocess.run([sys.executable, "-c", f"import sys; from viewer.cli import main; sys.exit(main([{str(tmp_path)!r}]))"],
+    r = subprocess.run([sys.executable, "-c", f"import sys; from tactile_flow.viewer.cli import main; sys.exit(main([{str(tmp_path)!r}]))"],
                        capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 2 and "--web" in r.stderr and "--save" in r.stderr
 
 
 def test_a_live_viewer_that_is_not_installed_is_refused_before_anything_moves(tmp_path):
-    from hardware.errors import ConfigError
-    from protocols.plan import make_plan
-    from protocols.run import live_setup
+    from tactile_flow.hardware.errors import ConfigError
+    from tactile_flow.protocols.plan import make_plan
+    from tactile_flow.protocols.run import live_setup
     cfg = _cfg("live.viewer=foxglove")
     with pytest.raises(ConfigError) as err:
         live_setup(cfg, make_plan(cfg))
@@ -373,7 +373,7 @@ def test_a_still_pattern_has_no_direction_and_a_sweep_along_the_finger_does_not_
 
 
 def test_mesh_and_frame_colours_share_one_scale(model):
-    from tactile.frames import to_uint8
+    from tactile_flow.tactile.frames import to_uint8
     lo, hi = model.config.intensity_range
     values = np.array([[lo, (lo + hi) / 2, hi, hi * 2], [0.0, 0.5, 1.0, 2.0]])
     rgba = draw.activation_colours(values, [(lo, hi), (0.0, 1.0)])          # a row per frame, each its own range

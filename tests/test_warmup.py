@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from conftest import DATA
-from importers import ImportSettings, import_source, read_bag, select_fingers
-from tactile import warmup
+from tactile_flow.importers import ImportSettings, import_source, read_bag, select_fingers
+from tactile_flow.tactile import warmup
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="reads child processes from /proc")
 
@@ -31,16 +31,16 @@ event.register("numba:compile", Listener())
 """
 
 ANALYSE = LISTEN + """
-from analysis.run import analyze_run
+from tactile_flow.analysis.run import analyze_run
 summary = analyze_run(sys.argv[1], {"workers": 2, "figures": False, "progress": False}, console=print)
 print(json.dumps({"segments": len(summary["segments"]), "compiled": sorted(set(compiled))}))
 """
 
 LIVE = LISTEN + """
 from hydra import compose, initialize_config_dir
-from protocols.plan import make_plan
-from protocols.run import live_setup
-from protocols.schema import register
+from tactile_flow.protocols.plan import make_plan
+from tactile_flow.protocols.run import live_setup
+from tactile_flow.protocols.schema import register
 register()
 with initialize_config_dir(config_dir=sys.argv[1], version_base=None):
     cfg = compose("config", overrides=["protocol=pour_grasp_reactive"])
@@ -50,8 +50,8 @@ print(json.dumps({"views": list(model.config.views), "compiled": sorted(set(comp
 
 INTERRUPTED = """
 import os, time
-from analysis.config import load_config
-from tactile import warmup
+from tactile_flow.analysis.config import load_config
+from tactile_flow.tactile import warmup
 
 def children():
     out = []
@@ -155,7 +155,7 @@ def test_groups_are_shared_out_longest_first():
 def test_a_warm_machine_has_nothing_to_compile(model):
     """Once the kernels have run (here, in this test session) no group is cold, so an analysis
     starts no child."""
-    from tactile.pipeline import process_view
+    from tactile_flow.tactile.pipeline import process_view
     activation = model.smooth(np.zeros((20, 24)))
     process_view(model, activation, "bottom", references={"unloaded": None})
     warmup.compile_group("signals", model.config)

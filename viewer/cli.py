@@ -26,7 +26,7 @@ BAD_INPUT = 2
 
 
 def parse_args(argv=None) -> argparse.Namespace:
-    from validation.cli import ArgumentParser, help_text
+    from tactile_flow.validation.cli import ArgumentParser, help_text
     ap = ArgumentParser(prog="tactile-view", description=help_text(__doc__))
     ap.add_argument("run_dir", metavar="RUN_DIR", help="a run directory (holding run.zarr) or a run.zarr")
     out = ap.add_mutually_exclusive_group()

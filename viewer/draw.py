@@ -12,7 +12,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from tactile.frames import to_uint8
+from tactile_flow.tactile.frames import to_uint8
 
 FLOW_COLOUR = (80, 220, 255, 255)          # flow-field arrows: cyan, visible on the colour map
 MEAN_COLOUR = (140, 255, 90, 255)          # the aggregated direction: green

@@ -25,7 +25,7 @@ import json
 import numpy as np
 import rerun as rr
 
-from hardware.transforms import rotvec_to_quaternion
+from tactile_flow.hardware.transforms import rotvec_to_quaternion
 
 from . import TIMELINE, draw
 from .live import send_events, send_live
@@ -137,7 +137,7 @@ def send_states(rec, scene: Scene) -> None:
     ev = scene.run.events
     if len(ev.time):
         send_events(rec, list(zip(ev.time, ev.kind, ev.name, ev.detail)))
-    from analysis.figures import COLOURS
+    from tactile_flow.analysis.figures import COLOURS
     for f in scene.run.fingers:
         segs = sorted((s for s in scene.segments if s.get("finger") == f), key=lambda s: s["start_s"])
         if not segs:

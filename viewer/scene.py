@@ -30,13 +30,13 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.config import AnalysisConfigError, load_config
-from analysis.flows import MIN_PEAK_KOHM
-from analysis.load import AnalysisInputError, RunData, load_run
-from analysis.pipeline import get_model
-from analysis.preprocess import PreparedRun, prepare
-from tactile.aggregate import aggregate_flow
-from tactile.flow import FlowEstimator
+from tactile_flow.analysis.config import AnalysisConfigError, load_config
+from tactile_flow.analysis.flows import MIN_PEAK_KOHM
+from tactile_flow.analysis.load import AnalysisInputError, RunData, load_run
+from tactile_flow.analysis.pipeline import get_model
+from tactile_flow.analysis.preprocess import PreparedRun, prepare
+from tactile_flow.tactile.aggregate import aggregate_flow
+from tactile_flow.tactile.flow import FlowEstimator
 
 from . import draw
 

@@ -2,7 +2,7 @@
 
 Each emulator speaks the real device's protocol so the real client library can be tested
 against it; see ``docs/ur10.md`` for the UR controller. Imports are lazy so that
-``python -m hardware.emulators.ur_controller`` runs the module once.
+``python -m tactile_flow.hardware.emulators.ur_controller`` runs the module once.
 """
 
 __all__ = ["URControllerConfig", "URControllerEmulator", "URControllerProcess"]

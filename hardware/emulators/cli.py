@@ -58,7 +58,7 @@ EPILOG = """exit status: 0 stopped by Ctrl-C or SIGTERM, 1 an emulator exited or
 
 
 def main(argv=None) -> int:
-    from validation.cli import ArgumentParser
+    from tactile_flow.validation.cli import ArgumentParser
     parser = ArgumentParser(prog="tactile-emulate", description=__doc__.replace("``", "").split("\n\nEvery")[0],
                             epilog=EPILOG)
     parser.add_argument("--host", default="127.0.0.1", help="loopback address for the UR controller emulator")

@@ -1,6 +1,6 @@
 """A rosbridge v2 server emulating the Shadow Hand's ROS stack, on a websocket (autobahn/asyncio).
 
-Run as a process (``python -m hardware.emulators.rosbridge_server --port 0``); it prints
+Run as a process (``python -m tactile_flow.hardware.emulators.rosbridge_server --port 0``); it prints
 ``READY url=ws://127.0.0.1:<port>`` once listening. It speaks the JSON operations a
 roslibpy client uses — ``advertise``/``unadvertise``, ``publish``, ``subscribe``/
 ``unsubscribe``, ``call_service`` (``/rosapi/topics``, ``/rosapi/get_time``) — and:
@@ -244,7 +244,7 @@ class RosbridgeEmulator(EmulatorProcess):
             args += ["--unconnected", ",".join(unconnected)]
         if pose_file:
             args += ["--pose-file", pose_file, "--surface", surface]
-        super().__init__("hardware.emulators.rosbridge_server", args)
+        super().__init__("tactile_flow.hardware.emulators.rosbridge_server", args)
 
     @property
     def url(self) -> str:

@@ -1,6 +1,6 @@
 """Serial-device emulators on pseudo-terminals: BioTac bridge, EZO-PMP-like pump, A&D-like scale.
 
-Run as a process (``python -m hardware.emulators.serial_devices``); it opens one pty pair
+Run as a process (``python -m tactile_flow.hardware.emulators.serial_devices``); it opens one pty pair
 per device, prints ``READY biotac=/dev/pts/N pump=/dev/pts/M scale=/dev/pts/K`` and serves
 until killed. The drivers open the pty slaves through pyserial exactly like real ports.
 With ``--link-dir DIR`` it also makes stable symlinks ``DIR/biotac``, ``DIR/pump``,
@@ -358,7 +358,7 @@ class SerialDevicesEmulator(EmulatorProcess):
             args += ["--link-dir", link_dir]
         if pose_file:
             args += ["--pose-file", pose_file, "--surface", surface]
-        super().__init__("hardware.emulators.serial_devices", args)
+        super().__init__("tactile_flow.hardware.emulators.serial_devices", args)
 
     @property
     def ports(self) -> dict[str, str]:

@@ -24,7 +24,7 @@ What ur_rtde talks to on a real robot, rebuilt from the protocols (no ur_rtde co
 Run it as a process (ur_rtde's constructors hold the GIL, so an emulator thread in the
 client's process would deadlock)::
 
-    python -m hardware.emulators.ur_controller --host 127.0.0.2
+    python -m tactile_flow.hardware.emulators.ur_controller --host 127.0.0.2
 
 It prints ``READY ur_controller ...`` once listening and stops on SIGTERM/SIGINT.
 :class:`URControllerProcess` does that from Python (tests, ``tactile-emulate``).
@@ -379,12 +379,12 @@ class URControllerEmulator(RtdeServer, DashboardServer):
 # ============================================================================ process
 class URControllerProcess(EmulatorProcess):
     """The emulator as a separate process (what tests and ``tactile-emulate`` should use):
-    ``python -m hardware.emulators.ur_controller --host HOST`` with ``options`` as flags
+    ``python -m tactile_flow.hardware.emulators.ur_controller --host HOST`` with ``options`` as flags
     (``initial_pose=(...)`` → ``--initial-pose x,y,z,...``). ``protective_stop()`` sends SIGUSR1."""
 
     def __init__(self, host: str = "127.0.0.1", ready_timeout_s: float = 10.0, **options):
         self.host, self.options = host, options
-        super().__init__("hardware.emulators.ur_controller", ["--host", host, *_flags(options)], ready_timeout_s)
+        super().__init__("tactile_flow.hardware.emulators.ur_controller", ["--host", host, *_flags(options)], ready_timeout_s)
 
     def protective_stop(self) -> None:
         os.kill(self.proc.pid, signal.SIGUSR1)
@@ -412,7 +412,7 @@ def _floats(text: str) -> tuple:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m hardware.emulators.ur_controller",
+    p = argparse.ArgumentParser(prog="python -m tactile_flow.hardware.emulators.ur_controller",
                                 description="Emulated UR controller (RTDE 30004, dashboard 29999, script 30003).")
     p.add_argument("--host", default="127.0.0.1", help="loopback address to bind (127.0.0.x)")
     p.add_argument("--model", default="UR10")

@@ -1,6 +1,6 @@
 """The simulated lab (``hardware=sim``): one world, one clock, five devices, ground truth.
 
-    from hardware.sim import make_sim_lab
+    from tactile_flow.hardware.sim import make_sim_lab
     with make_sim_lab({"seed": 1}, {"kind": "straws"}) as lab:
         lab.arm.move_linear(pose, speed=0.01)
         frames = lab.biotac.read()

@@ -2,7 +2,7 @@
 
 Run once (needs the ``rosbags`` package; the simulator itself does not)::
 
-    python -m hardware.sim.calibrate tests/data/biotac_rest_untouched.bag \
+    python -m tactile_flow.hardware.sim.calibrate tests/data/biotac_rest_untouched.bag \
         hardware/sim/biotac_rest_calibration.json
 
 For every connected sensor (disconnected ones read pdc = -22072 and are skipped) it
@@ -89,7 +89,7 @@ def derive_calibration(path) -> dict:
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 2:
-        print("usage: python -m hardware.sim.calibrate BAG OUT.json", file=sys.stderr)
+        print("usage: python -m tactile_flow.hardware.sim.calibrate BAG OUT.json", file=sys.stderr)
         return 2
     cal = derive_calibration(argv[0])
     Path(argv[1]).write_text(json.dumps(cal, indent=1) + "\n")

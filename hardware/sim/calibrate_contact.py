@@ -2,7 +2,7 @@
 
 Run once (numpy only)::
 
-    python -m hardware.sim.calibrate_contact tests/data/biotac_sp_grasps \\
+    python -m tactile_flow.hardware.sim.calibrate_contact tests/data/biotac_sp_grasps \\
         hardware/sim/biotac_contact_calibration.json
 
 Input: the grasp CSVs of ``tests/data/biotac_sp_grasps`` (raw electrode counts of ff, mf, th;
@@ -187,7 +187,7 @@ def _sha256(path: Path) -> str:
 
 def derive(directory, seed: int = 0) -> dict:
     """The calibration dict (JSON-ready) from every ``*.csv`` of ``directory``."""
-    from tactile.geometry import load_taxels
+    from tactile_flow.tactile.geometry import load_taxels
 
     taxels = load_taxels()
     rest = json.loads(Path(__file__).with_name(REST_CALIBRATION).read_text())["sensors"]
@@ -278,7 +278,7 @@ def _far_field(x, y, group, rng) -> dict:
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) != 2:
-        print("usage: python -m hardware.sim.calibrate_contact GRASP_DIR OUT.json", file=sys.stderr)
+        print("usage: python -m tactile_flow.hardware.sim.calibrate_contact GRASP_DIR OUT.json", file=sys.stderr)
         return 2
     try:
         cal = derive(argv[0])

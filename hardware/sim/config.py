@@ -4,4 +4,4 @@ from ..config import *  # noqa: F401,F403
 from ..config import (ArmConfig, ContactConfig, FaultsConfig, HandConfig, PourConfig, PumpConfig,  # noqa: F401
                       ScaleConfig, SensorModelConfig, SimConfig, StageConfig, WorkspaceConfig, load_config,
                       validate)
-from validation import build, to_plain  # noqa: F401
+from tactile_flow.validation import build, to_plain  # noqa: F401

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tactile import geometry
+from tactile_flow.tactile import geometry
 
 
 @dataclass(frozen=True)

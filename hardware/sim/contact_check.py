@@ -1,6 +1,6 @@
 """Simulated presses measured as the real grasp frames were: the contact calibration's check.
 
-    python -m hardware.sim.contact_check [hardware/sim/biotac_contact_calibration.json]
+    python -m tactile_flow.hardware.sim.contact_check [hardware/sim/biotac_contact_calibration.json]
 
 prints the table of ``docs/simulator.md``: the real light and firm contacts' median statistics
 (:mod:`hardware.sim.calibrate_contact`) beside those of simulated presses of the ``ff`` pad on
@@ -43,7 +43,7 @@ def simulated_press(force_n: float, surface=None, seed: int = 0, hold_s: float =
 def press_statistics(force_n: float, threshold: float, **kw) -> dict:
     """Median :func:`contact_stats` over the frames of a simulated press, its far level
     (counts) and the in-contact noise per drop bin (median of the frame-pair estimates)."""
-    from tactile.geometry import load_taxels
+    from tactile_flow.tactile.geometry import load_taxels
 
     taxels = load_taxels()
     p = simulated_press(force_n, **kw)
