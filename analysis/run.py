@@ -15,13 +15,11 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 import shutil
 import uuid
 from datetime import datetime, timezone
 from pathlib import Path
 
-import numpy as np
 
 from tactile_flow.cliapp.heap import long_lived_frozen
 from tactile_flow.cliapp.runner import signals_received
@@ -33,6 +31,7 @@ from . import figures as figs
 from . import results
 from . import score as scoring
 from .config import as_dict, load_config
+from .headline import headline, whole_contact_slips
 from .load import AnalysisInputError, load_run, open_truth
 from .pipeline import analyse, get_model
 
@@ -50,50 +49,6 @@ def code_version() -> dict:
     dirty = None if git["dirty"] == "unknown" else bool(git["dirty"] or git["untracked_files"])
     commit = git["commit"]
     return {"package": pkg, "git_commit": commit, "analysis_or_tactile_dirty": dirty}
-
-
-def _headline(a, score: dict | None) -> dict:
-    h = {"segments": len(a.segments), "skipped": len(a.skipped),
-         "fingers_in_contact": len(a.contacts), "status": "ok" if a.contacts else "no_contact"}
-    if a.crossings:
-        h["crossings"] = len(a.crossings)
-        widths = [c["width_mm"] for c in a.crossings if math.isfinite(c.get("width_mm", float("nan")))]
-        h["width_mm_median"] = float(np.median(widths)) if widths else None
-        d = np.array([c["direction_sensor"] for c in a.crossings], float)
-        d = d[np.all(np.isfinite(d), axis=1)]
-        if len(d):
-            m = d.mean(axis=0)
-            h["direction_sensor_deg"] = float(np.degrees(np.arctan2(m[1], m[0])))
-        ang = [c["texture_angle_deg"] for c in a.crossings if math.isfinite(c.get("texture_angle_deg", float("nan")))]
-        h["texture_angle_deg_median"] = float(np.median(ang)) if ang else None
-    if a.pour:
-        for k, v in a.pour["onsets"].items():
-            h[f"onset_{k}_s"] = v
-    slips = whole_contact_slips(a)
-    if slips:
-        h["slip"] = {f: {k: e[k] for k in ("slip_class", "slip_direction_sensor_deg", "slip_displacement_mm",
-                                           "rotation_deg", "confidence")} for f, e in slips.items()}
-    if score:
-        s = score["summary"]
-        for k in ("direction_correct_fraction", "width_error_mm_median", "boundary_error_mm_median",
-                  "boundary_error_ms_median",
-                  "slip_onset_error_ms", "slip_direction_correct_fraction", "rotation_sense_correct_fraction",
-                  "touch_vs_slip_correct_fraction", "slip_class_correct_fraction"):
-            if s.get(k) is not None:
-                h[f"score_{k}"] = s[k]
-        h["score_all_targets_met"] = score.get("all_targets_met")
-    return h
-
-
-def whole_contact_slips(a) -> dict:
-    """Finger → the slip estimate of its whole contact: the ``all`` segment (imported records and
-    other generic protocols), else its longest ``contact`` segment; fingers without either are left out."""
-    out = {}
-    for label in ("contact", "all"):
-        for sg in sorted(a.segments, key=lambda x: x.frames()):
-            if sg.label == label and sg.id in a.slips:
-                out[sg.finger] = a.slips[sg.id]
-    return out
 
 
 def _segments_json(a) -> list[dict]:
@@ -160,7 +115,7 @@ def _analyse(store_path: Path, run, model, cfg, console, signals_before: int) ->
         score["analysis_id"] = analysis_id
     summary = {"analysis_id": analysis_id, "run": str(store_path), "protocol": run.protocol,
                "run_status": run.status, "scheme": a.scheme, "labels": run.labels,
-               "headline": _headline(a, score), "provenance": provenance,
+               "headline": headline(a, score), "provenance": provenance,
                "contacts": {f: [[float(run.time[s]), float(run.time[min(e, len(run.time) - 1)])] for s, e in ivs]
                             for f, ivs in a.contacts.items()},
                "begins_in_contact": {f: ivs[0][0] == 0 for f, ivs in a.contacts.items()},
