@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import csv
 import glob
+import io
 import os
 import re
 import sys
@@ -35,6 +36,9 @@ from hydra.types import RunMode
 
 import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import signals_received
+from tactile_flow.runstore import files
+from tactile_flow.runstore.paths import PathOutsideRoot
+from tactile_flow.runstore.rundir import RunDirBusy
 
 from .config import AnalysisConfigError
 from .load import AnalysisInputError
@@ -99,8 +103,8 @@ def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
             summary = analyze_run(store, analysis_cfg, console=console)
             row["result"] = "analysed"
             row.update(summary.get("headline", {}))
-        except (AnalysisInputError, AnalysisConfigError) as exc:
-            _report(exc, "error", verbose)
+        except (AnalysisInputError, AnalysisConfigError, PathOutsideRoot, RunDirBusy) as exc:
+            _report(exc, "error", verbose)   # bad input: a planted link, a name, a directory in use
             row["result"] = f"error: {exc}"
             code = max(code, BAD_INPUT)
         except Exception as exc:  # noqa: BLE001 - one line per failed run, keep going
@@ -129,18 +133,20 @@ def _report(exc: Exception, what: str, verbose: bool) -> None:
 
 
 def write_table(root: Path, rows: list[dict]) -> None:
-    """``analysis_summary.csv`` and ``analysis_summary.md`` in ``root``."""
+    """``analysis_summary.csv`` and ``analysis_summary.md`` in ``root`` (never through a link:
+    :mod:`runstore.files`)."""
     columns = list(dict.fromkeys(k for r in rows for k in r))
-    with open(root / "analysis_summary.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=columns)
-        w.writeheader()
-        w.writerows(rows)
+    text = io.StringIO()
+    w = csv.DictWriter(text, fieldnames=columns)
+    w.writeheader()
+    w.writerows(rows)
+    files.write_text(root, "analysis_summary.csv", text.getvalue())
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     for r in rows:
         cells = [f"{r.get(c):.4g}" if isinstance(r.get(c), float) else str(r.get(c, "")).replace("|", "\\|")
                  for c in columns]
         lines.append("| " + " | ".join(cells) + " |")
-    (root / "analysis_summary.md").write_text("\n".join(lines) + "\n")
+    files.write_text(root, "analysis_summary.md", "\n".join(lines) + "\n")
     print(f"summary of {len(rows)} runs: {root / 'analysis_summary.md'}")
 
 

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile_flow.runstore import files
 from tactile_flow.runstore.labelled import Dataset, Tree, Variable
 
 from .pipeline import AGG_FIELDS, Analysis
@@ -228,8 +229,7 @@ def swap_in(staging: Path, run_dir: Path, history_record: dict | None) -> None:
     trash.mkdir()
     try:
         if history_record is not None:
-            with open(run_dir / "analysis_history.jsonl", "a") as f:
-                f.write(json.dumps(_clean(history_record), sort_keys=True) + "\n")
+            files.append_text(run_dir, "analysis_history.jsonl", json.dumps(_clean(history_record), sort_keys=True) + "\n")
         if (run_dir / "summary.json").exists():
             os.replace(run_dir / "summary.json", trash / "summary.json")
         for name in [o for o in OUTPUTS if o != "summary.json"] + ["summary.json"]:

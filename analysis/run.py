@@ -23,7 +23,7 @@ from pathlib import Path
 
 from tactile_flow.cliapp.heap import long_lived_frozen
 from tactile_flow.cliapp.runner import signals_received
-from tactile_flow.runstore import inflight, labelled, rundir
+from tactile_flow.runstore import files, inflight, labelled, rundir
 from tactile_flow.runstore.provenance import git_state
 from tactile_flow.tactile import warmup
 
@@ -78,6 +78,7 @@ def analyze_run(store_path, analysis_cfg=None, *, console=print) -> dict:
     if not (store_path / "zarr.json").is_file():
         return _analyse_and_write(store_path, cfg, console)     # load_run says what is wrong; nothing to lock
     with rundir.locked(store_path.parent):
+        files.refuse_links(store_path.parent, ("analysis_history.jsonl",))
         removed = results.remove_debris(store_path.parent)
         if removed:
             console(f"analysis: removed what a killed analysis left in {store_path.parent}: {', '.join(removed)}")

@@ -12,6 +12,7 @@ Errors are one line naming the key at fault; ``verbose=true`` adds the traceback
 from __future__ import annotations
 
 import csv
+import io
 import json
 import logging
 import sys
@@ -20,11 +21,12 @@ from pathlib import Path
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
+from hydra.types import RunMode
 from omegaconf import OmegaConf
 
 import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import report
-from tactile_flow.runstore import RunStatus, rundir
+from tactile_flow.runstore import RunStatus, files, paths, rundir
 
 from .interrupts import Interrupts
 from .schema import check_targets, register
@@ -72,12 +74,17 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
     from . import resume                            # the run store, the simulator, numba: not for --help
     from .run import RunResult, hand_off, run_protocol
     try:
+        check_run_dir(cfg, hc, run_dir)
         check_targets(cfg)
         _refuse_parallel_hardware(cfg, hc)
         decision = "run"
         if cfg.resume and not cfg.plan_only:
             with interrupts.during("writing"):        # an earlier attempt may be moved aside
                 decision = resume.decide(run_dir, OmegaConf.to_yaml(cfg, resolve=True), analyze=cfg.analyze)
+        if decision == "run" and not cfg.plan_only:
+            with interrupts.during("writing"):
+                record_config(run_dir, cfg)
+            log.info("tactile-run %s", " ".join(hc.overrides.task))     # the log's first line (opens it)
         if decision == "skip":
             console(f"run {run_dir}: skipped (succeeded before with the same config and code)")
             return 0
@@ -121,6 +128,28 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
     return code
 
 
+def check_run_dir(cfg, hc, run_dir: Path) -> None:
+    """Before anything is written in ``run_dir``: the protocol's name is a plain name, a sweep's
+    job directory is inside the sweep directory (:mod:`runstore.paths`), and, unless resuming,
+    the directory holds no run (a finished run's record is never rewritten). ``ValueError``."""
+    paths.component(cfg.protocol.name, "protocol.name")
+    if hc.mode == RunMode.MULTIRUN:
+        paths.within(hc.sweep.dir, run_dir, "hydra.sweep.subdir")
+    if not cfg.resume:
+        rundir.refuse_finished(run_dir)
+
+
+def record_config(run_dir: Path, cfg) -> None:
+    """Hydra's record of the job in ``run_dir/.hydra/``: ``config.yaml`` (the job's config),
+    ``hydra.yaml`` and ``overrides.yaml``, as Hydra writes them (``hydra.output_subdir`` is
+    null: the run writes them itself, after its checks, never over a finished run's;
+    :mod:`runstore.files`)."""
+    hydra_cfg = HydraConfig.instance().cfg
+    for name, node in (("config.yaml", cfg), ("hydra.yaml", hydra_cfg),
+                       ("overrides.yaml", hydra_cfg.hydra.overrides.task)):
+        files.write_text(run_dir, f".hydra/{name}", OmegaConf.to_yaml(node), record=True)
+
+
 def _report(cfg, exc: Exception, what: str) -> None:
     report(exc, what, bool(cfg.get("verbose")))
     log.error(f"{what}: {exc}", exc_info=exc)
@@ -156,6 +185,7 @@ def main() -> None:
         print(listing(CONF_DIR))
         sys.exit(0)
     register()
+    paths.register_resolvers()               # ${tf_name:...} in the run directories' names
     logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
     _interrupts.install()                    # the run owns Ctrl-C and SIGTERM (protocols.interrupts)
     # protocols are data: no Hydra settings, no code; a sweep's exit status is its highest job's
@@ -166,19 +196,30 @@ class RunDirLock(Callback):
     """One run directory, one writer: lock ``hydra.run.dir`` (``hydra.sweep.dir`` with ``-m``)
     before Hydra writes anything there (:mod:`runstore.rundir`); a second ``tactile-run``
     on the same directory is refused with one line, exit 2, leaving the first one's files alone.
-    A job that recorded nothing (``plan_only``, a bad config, a failed connection) leaves no
-    directory (:func:`runstore.rundir.remove_if_unused`; with ``-m`` once the sweep has read
-    its jobs' results, in the process that started it)."""
+    Before that, the directory is checked: inside the root its template starts with
+    (``outputs/``, :mod:`runstore.paths`), whatever ``protocol.name`` holds, and not a
+    finished run's (unless ``resume=true``). A job that recorded nothing (``plan_only``, a bad
+    config, a failed connection) leaves no directory (:func:`runstore.rundir.remove_if_unused`;
+    with ``-m`` once the sweep has read its jobs' results, in the process that started it)."""
 
     def on_run_start(self, config, **kwargs) -> None:
-        self._take(config.hydra.run.dir)
+        directory = self._checked(config, "run")
+        self._take(directory)                  # a run still recording there: "in use by another process"
+        if not config.get("resume"):
+            self._refuse(rundir.refuse_finished, directory)
+
+    def on_job_end(self, config, **kwargs) -> None:
+        rundir.retire_run_logs()           # the next job's first lines never reach this run's log
 
     def on_run_end(self, config, **kwargs) -> None:
         rundir.release(config.hydra.run.dir)
         rundir.remove_if_unused(config.hydra.run.dir)      # nothing ran: no empty run directory
 
     def on_multirun_start(self, config, **kwargs) -> None:
-        self._take(config.hydra.sweep.dir)
+        directory = self._checked(config, "sweep")
+        self._take(directory)
+        if not config.get("resume"):
+            self._refuse(_refuse_finished_sweep, directory)
 
     def on_multirun_end(self, config, **kwargs) -> None:
         for job in Path(config.hydra.sweep.dir).iterdir():
@@ -187,13 +228,40 @@ class RunDirLock(Callback):
         rundir.release(config.hydra.sweep.dir)
         rundir.remove_if_unused(config.hydra.sweep.dir)
 
+    @classmethod
+    def _checked(cls, config, kind: str) -> str:
+        """``hydra.<kind>.dir``, refused if it leaves the root its template starts with, or if the
+        protocol's name is not a plain name (its directory name is made safe either way)."""
+        template = OmegaConf.to_container(config.hydra[kind], resolve=False)["dir"]
+        directory = str(config.hydra[kind].dir)
+        cls._refuse(paths.within, paths.template_root(str(template)), directory, f"hydra.{kind}.dir")
+        if OmegaConf.select(config, "protocol.name", default=None) is not None:
+            cls._refuse(paths.component, config.protocol.name, "protocol.name")
+        return directory
+
+    @classmethod
+    def _take(cls, directory) -> None:
+        cls._refuse(rundir.acquire, directory)
+
     @staticmethod
-    def _take(directory) -> None:
+    def _refuse(check, *args) -> None:
+        """``check(*args)``; a ``ValueError`` is one line and exit 2 (Hydra would turn a
+        callback's exception into a warning and go on)."""
         try:
-            rundir.acquire(directory)
-        except rundir.RunDirBusy as exc:
+            check(*args)
+        except ValueError as exc:
             print(f"error: {exc}", file=sys.stderr)
-            raise SystemExit(BAD_INPUT) from None      # Hydra turns a callback's exceptions into warnings
+            raise SystemExit(BAD_INPUT) from None
+
+
+def _refuse_finished_sweep(directory) -> None:
+    """A sweep directory whose jobs hold runs is refused unless the sweep is resumed."""
+    done = sorted(p.parent.name for p in Path(directory).glob("*/run.json"))
+    if done:
+        raise rundir.RunFinished(f"hydra.sweep.dir {directory} holds the runs of an earlier sweep "
+                                 f"({', '.join(done[:3])}{', ...' if len(done) > 3 else ''}); their records are never "
+                                 f"rewritten: resume it with the same command and resume=true, or choose another "
+                                 f"hydra.sweep.dir")
 
 
 class SweepSummary(jobresults.SweepResults):
@@ -241,14 +309,16 @@ def _job_number(name: str) -> int:
 
 
 def write_summary(root: Path, rows: list[dict]) -> None:
+    """``summary.csv`` and ``summary.md`` at the sweep's root (never through a link)."""
     columns = list(dict.fromkeys(k for r in rows for k in r))
-    with open(root / "summary.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=columns)
-        writer.writeheader()
-        writer.writerows(rows)
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=columns)
+    writer.writeheader()
+    writer.writerows(rows)
+    files.write_text(root, "summary.csv", text.getvalue())
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     lines += ["| " + " | ".join(_cell(r.get(c, "")) for c in columns) + " |" for r in rows]
-    (root / "summary.md").write_text("\n".join(lines) + "\n")
+    files.write_text(root, "summary.md", "\n".join(lines) + "\n")
 
 
 def _cell(value) -> str:

@@ -13,15 +13,16 @@ from __future__ import annotations
 
 import difflib
 import json
-import shutil
+import os
 from pathlib import Path
 
 import yaml
 
+from tactile_flow.runstore import files
 from tactile_flow.runstore.provenance import git_state
 
 IGNORED_KEYS = ("resume", "progress", "verbose")
-KEPT = (".hydra", "previous", ".tactile.lock")     # never set aside: Hydra's record, earlier attempts, the lock
+KEPT = ("previous", ".tactile.lock", "job_result.json")   # never set aside: earlier attempts, the lock, the job's mark
 
 
 class ResumeMismatch(ValueError):
@@ -89,12 +90,12 @@ def analysis_state(run_dir) -> str:
 
 
 def _set_aside(run_dir: Path) -> None:
-    """Move an earlier, unsuccessful attempt's files to ``previous/<n>/``."""
-    leftovers = [p for p in run_dir.glob("*") if p.name not in KEPT and not p.name.endswith(".log")]
+    """Move an earlier, unsuccessful attempt's files (its ``.hydra/`` record and log too) to
+    ``previous/<n>/`` (made without following a link: :mod:`runstore.files`)."""
+    leftovers = [p for p in run_dir.iterdir() if p.name not in KEPT]
     if not leftovers:
         return
-    n = len(list((run_dir / "previous").glob("*"))) if (run_dir / "previous").exists() else 0
-    target = run_dir / "previous" / str(n)
-    target.mkdir(parents=True)
+    n = len(list((run_dir / "previous").iterdir())) if (run_dir / "previous").is_dir() else 0
+    target = files.make_dirs(run_dir, f"previous/{n}")
     for p in leftovers:
-        shutil.move(str(p), target / p.name)
+        os.rename(p, target / p.name)            # the entry itself (a link stays a link), same file system

@@ -11,15 +11,14 @@ from __future__ import annotations
 import hashlib
 import importlib.metadata
 import json
-import os
 import platform
 import socket
 import subprocess
 import sys
-import tempfile
 import uuid
 from pathlib import Path
 
+from . import files
 from .jsonvalues import jsonable, utc_now
 from .layout import SCHEMA_VERSION
 
@@ -113,30 +112,12 @@ def summary(provenance: dict) -> dict:
 def write_run_json(path, provenance: dict, status: str, end_time: str | None = None,
                    extra: dict | None = None) -> Path:
     """Write ``provenance`` plus ``status``, ``end_time`` (default: now) and ``extra`` (e.g. the
-    error) as JSON to ``path`` (a file, or a directory to hold ``run.json``), atomically: a
-    temporary file in the same directory, fsynced, then renamed over the target. Returns the
-    file's path."""
+    error) as JSON to ``path`` (a file, or a directory to hold ``run.json``), atomically and
+    never through a link (:func:`runstore.files.write_text`: a temporary file in the same
+    directory, fsynced, then renamed over the target). Returns the file's path."""
     path = Path(path)
     if path.is_dir():
         path = path / "run.json"
     doc = dict(provenance, **(extra or {}), status=status, end_time=end_time or utc_now())
     text = json.dumps(jsonable(doc), indent=2, sort_keys=True, allow_nan=False)
-    fd, tmp = tempfile.mkstemp(prefix=".run.json.", suffix=".partial", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    try:                                # make the rename itself durable
-        dfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass
-    return path
+    return files.write_text(path.parent, path.name, text + "\n")
