@@ -37,6 +37,7 @@ from hydra.types import RunMode
 import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import signals_received
 from tactile_flow.runstore import files
+from tactile_flow.runstore.analyses import AnalysisNameTaken
 from tactile_flow.runstore.paths import PathOutsideRoot
 from tactile_flow.runstore.rundir import RunDirBusy
 
@@ -85,10 +86,11 @@ def table_dir(spec: str) -> Path:
 
 
 def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
-                  table: bool = True) -> tuple[int, list[dict]]:
-    """Analyse the run stores ``spec`` names (:func:`find_stores`); never raises. The exit
-    code and one row per run (``run``, ``result``, then the summary's ``headline``); with
-    ``table`` and several runs, their table is written (:func:`table_dir`)."""
+                  table: bool = True, name: str | None = None, force: bool = False) -> tuple[int, list[dict]]:
+    """Analyse the run stores ``spec`` names (:func:`find_stores`) into analyses called ``name``
+    (default: their key, :func:`analysis.run.default_name`); never raises. The exit code and
+    one row per run (``run``, ``analysis`` (its name), ``result``, then the summary's
+    ``headline``); with ``table`` and several runs, their table is written (:func:`table_dir`)."""
     from .run import analyze_run
     stores = find_stores(spec) if spec else []
     if not stores:
@@ -97,13 +99,14 @@ def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
         return BAD_INPUT, []
     code, rows = 0, []
     for store in stores:
-        row = {"run": str(store)}
+        row = {"run": str(store), "analysis": name or ""}
         rows.append(row)
         try:
-            summary = analyze_run(store, analysis_cfg, console=console)
+            summary = analyze_run(store, analysis_cfg, name=name, force=force, console=console)
+            row["analysis"] = summary.get("analysis") or row["analysis"]
             row["result"] = "analysed"
             row.update(summary.get("headline", {}))
-        except (AnalysisInputError, AnalysisConfigError, PathOutsideRoot, RunDirBusy) as exc:
+        except (AnalysisInputError, AnalysisConfigError, PathOutsideRoot, RunDirBusy, AnalysisNameTaken) as exc:
             _report(exc, "error", verbose)   # bad input: a planted link, a name, a directory in use
             row["result"] = f"error: {exc}"
             code = max(code, BAD_INPUT)
@@ -181,7 +184,8 @@ def _app(cfg) -> None:
     sweep = HydraConfig.get().mode == RunMode.MULTIRUN          # the sweep's table, not one per job
     code, rows = 0, []
     for spec in (run if OmegaConf.is_list(run) else [run]):
-        c, r = analyse_paths(str(spec), cfg.analysis, bool(cfg.get("verbose")), table=not sweep)
+        c, r = analyse_paths(str(spec), cfg.analysis, bool(cfg.get("verbose")), table=not sweep,
+                             name=None if cfg.get("name") is None else str(cfg.name), force=bool(cfg.get("force")))
         code, rows = max(code, c), rows + r
         if c == INTERRUPTED:
             break

@@ -26,7 +26,7 @@ from omegaconf import OmegaConf
 
 import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import report
-from tactile_flow.runstore import RunStatus, files, paths, rundir
+from tactile_flow.runstore import RunStatus, analyses, files, paths, rundir
 
 from .interrupts import Interrupts
 from .schema import check_targets, register
@@ -296,8 +296,10 @@ def sweep_rows(root: Path) -> list[dict]:
         row = {"job": job.name, "overrides": " ".join(overrides), "status": info.get("status"),
                "run_id": info.get("run_id"), "error": info.get("error") or "",
                "analysis": resume.analysis_state(job)}
-        if row["analysis"] == "complete":                # results only from a whole analysis
-            row.update({f"result.{k}": v for k, v in json.loads((job / "summary.json").read_text())
+        current = analyses.current_dir(job)
+        if current is not None:                          # results only from a whole analysis
+            row["analysis_name"] = analyses.current_name(job)
+            row.update({f"result.{k}": v for k, v in json.loads((current / analyses.SUMMARY).read_text())
                         .get("headline", {}).items()})
         rows.append(row)
     return rows

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import yaml
 
-from tactile_flow.runstore import files
+from tactile_flow.runstore import analyses, files
 from tactile_flow.runstore.provenance import git_state
 
 IGNORED_KEYS = ("resume", "progress", "verbose")
@@ -67,26 +67,11 @@ def decide(run_dir, config_yaml: str, git: dict | None = None, analyze: bool = F
 
 
 def analysis_state(run_dir) -> str:
-    """``complete``, ``missing`` or ``incomplete``: the state of a run directory's analysis.
-
-    ``summary.json`` is the analysis's commit mark (written last, removed first when an
-    analysis replaces another: ``analysis.results.swap_in``), and ``analysis.zarr`` and
-    ``score.json`` carry the same ``analysis_id``; outputs without the mark, or with other
-    ids, are an analysis killed half-way."""
-    run_dir = Path(run_dir)
-    summary = run_dir / "summary.json"
-    if not summary.exists():
-        partial = any((run_dir / name).exists() for name in ("analysis.zarr", "score.json"))
-        return "incomplete" if partial else "missing"
-    ids = []
-    try:
-        ids.append(json.loads(summary.read_text())["analysis_id"])
-        ids.append(json.loads((run_dir / "analysis.zarr" / "zarr.json").read_text())["attributes"]["analysis_id"])
-        if (run_dir / "score.json").exists():
-            ids.append(json.loads((run_dir / "score.json").read_text())["analysis_id"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return "incomplete"
-    return "complete" if len(set(ids)) == 1 else "incomplete"
+    """``complete``, ``missing`` or ``incomplete``: the state of a run directory's analysis
+    (:func:`runstore.analyses.state`: complete when it has a current analysis, each analysis
+    being made aside and renamed into place whole; incomplete: only the outputs of an analysis
+    killed half-way, in the layout before 0.2)."""
+    return analyses.state(run_dir)
 
 
 def _set_aside(run_dir: Path) -> None:

@@ -48,6 +48,36 @@ def git_state(root: Path = PROJECT_ROOT, paths: tuple[str, ...] = ()) -> dict:
             "untracked_files": len(untracked)}
 
 
+#: the libraries whose versions can change an analysis's numbers (part of its key)
+ANALYSIS_LIBRARIES = ("numpy", "scipy", "opencv-contrib-python-headless", "numba", "zarr", "numcodecs")
+
+
+def code_identity(paths: tuple[str, ...], libraries: tuple[str, ...] = ANALYSIS_LIBRARIES,
+                  root: Path = PROJECT_ROOT) -> dict:
+    """What code decides a computation's result: the package's version, the git trees of
+    ``paths`` at HEAD (so a commit elsewhere in the project changes nothing) with the SHA-256
+    of their uncommitted diff and their untracked files, and ``libraries``' versions. Outside
+    a git checkout, the package version and the libraries."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    def ver(name: str) -> str:
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return UNKNOWN
+    out = {"package": ver("tactile-flow"), "libraries": {n: ver(n) for n in libraries}}
+    state = git_state(root, paths)
+    if state["commit"] != UNKNOWN:
+        try:
+            trees = _git(root, "rev-parse", *(f"HEAD:{p}" for p in paths)).decode().split()
+        except (OSError, subprocess.SubprocessError):
+            trees = [UNKNOWN] * len(paths)
+        out["trees"] = dict(zip(paths, trees))
+        out["diff_sha256"] = state["diff_sha256"] if state["dirty"] else None
+        out["untracked_files"] = state["untracked_files"]
+    return out
+
+
 def package_versions() -> dict[str, str]:
     """Version of every installed distribution, by name (sorted)."""
     out = {}

@@ -53,9 +53,11 @@ def refuse_finished(directory, what: str = "run directory") -> None:
                           f"choose another directory (hydra.run.dir=...)")
 
 
-def acquire(directory) -> None:
+def acquire(directory, shared: bool = False) -> None:
     """Take the lock of ``directory`` (created if needed); :class:`RunDirBusy` naming the
-    owner's pid if another process holds it."""
+    owner's pid if another process holds it. ``shared``: several processes may hold it at once
+    (analyses of a finished run, each in a directory of its own) but not beside an exclusive
+    holder (a recording, ``tactile-recover``)."""
     directory = Path(directory)
     key = str(directory.resolve())
     if key in _held:
@@ -64,14 +66,14 @@ def acquire(directory) -> None:
     directory.mkdir(parents=True, exist_ok=True)
     fd = files.open_file(directory, LOCK_NAME, os.O_RDWR | os.O_CREAT)       # never through a link
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
     except BlockingIOError:
         owner = _read_pid(fd)
         os.close(fd)
         raise RunDirBusy(f"{directory} is in use by another process{f' (pid {owner})' if owner else ''}; "
                          f"one run directory has one writer: choose another directory or wait for it "
                          f"to end") from None
-    os.ftruncate(fd, 0)
+    os.ftruncate(fd, 0)                    # the (last) holder's pid, for the messages
     os.write(fd, f"{os.getpid()}\n".encode())
     _held[key] = [fd, 1]
 
@@ -114,9 +116,9 @@ def remove_if_unused(directory) -> bool:
 
 
 @contextmanager
-def locked(directory):
+def locked(directory, shared: bool = False):
     """``with locked(run_dir): ...`` — :func:`acquire` then :func:`release`."""
-    acquire(directory)
+    acquire(directory, shared)
     try:
         yield
     finally:
@@ -131,7 +133,7 @@ def holder(directory) -> int | None:
         return None
     fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
     try:
-        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)      # held at all, shared or not
     except BlockingIOError:
         return _read_pid(fd) or -1
     finally:
