@@ -23,6 +23,8 @@ from .jsonvalues import jsonable, utc_now
 from .layout import SCHEMA_VERSION
 
 UNKNOWN = "unknown"
+#: set by ``tactile-runs reproduce`` for the run it starts: JSON naming the run reproduced
+REPRODUCES_ENV = "TACTILE_REPRODUCES"
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -46,6 +48,50 @@ def git_state(root: Path = PROJECT_ROOT, paths: tuple[str, ...] = ()) -> dict:
         return {"commit": UNKNOWN, "dirty": UNKNOWN, "diff_sha256": UNKNOWN, "untracked_files": UNKNOWN}
     return {"commit": commit, "dirty": bool(diff), "diff_sha256": hashlib.sha256(diff).hexdigest(),
             "untracked_files": len(untracked)}
+
+
+#: the project's code, as folders of the checkout (what a run's code.diff covers)
+CODE_PATHS = ("tactile_flow", "tactile", "hardware", "runstore", "protocols", "analysis", "importers", "cliapp",
+              "viewer", "validation", "conf", "pyproject.toml")
+CODE_DIFF = "code.diff"
+MAX_UNTRACKED_BYTES = 1 << 20          # an untracked file larger than this is named, not kept in code.diff
+
+
+def code_state(root: Path = PROJECT_ROOT, paths: tuple[str, ...] = CODE_PATHS) -> tuple[dict, bytes]:
+    """The code that runs, and its uncommitted changes as a patch ``git apply`` restores.
+
+    Returns ``({"package", "commit", "dirty", "diff_sha256", "untracked_left_out"}, patch)``:
+    the patch is ``git diff HEAD --binary`` of ``paths`` followed by every untracked (not
+    ignored) file under ``paths`` as a new file (files over :data:`MAX_UNTRACKED_BYTES` are
+    named in ``untracked_left_out`` instead); ``diff_sha256`` is its SHA-256 (None when the
+    tree is clean). Outside a git checkout: ``commit`` ``"unknown"``, an empty patch."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        pkg = version("tactile-flow")
+    except PackageNotFoundError:
+        pkg = UNKNOWN
+    try:
+        top = Path(_git(root, "rev-parse", "--show-toplevel").decode().strip()).resolve()
+        if top != root.resolve():
+            raise ValueError(f"{root} is inside {top}, not a checkout of this project")
+        commit = _git(root, "rev-parse", "HEAD").decode().strip()
+        patch = _git(root, "diff", "HEAD", "--binary", "--", *paths)
+        untracked = [u for u in _git(root, "ls-files", "--others", "--exclude-standard", "-z", "--", *paths)
+                     .decode().split("\0") if u]
+    except (OSError, subprocess.SubprocessError, ValueError):
+        return {"package": pkg, "commit": UNKNOWN, "dirty": UNKNOWN, "diff_sha256": UNKNOWN,
+                "untracked_left_out": []}, b""
+    left_out = []
+    for rel in sorted(untracked):
+        if (root / rel).stat().st_size > MAX_UNTRACKED_BYTES:
+            left_out.append(rel)
+            continue
+        new = subprocess.run(["git", "-C", str(root), "diff", "--no-index", "--binary", "--", "/dev/null", rel],
+                             capture_output=True, timeout=20)
+        patch += new.stdout
+    return {"package": pkg, "commit": commit, "dirty": bool(patch),
+            "diff_sha256": hashlib.sha256(patch).hexdigest() if patch else None,
+            "untracked_left_out": left_out}, patch
 
 
 #: the libraries whose versions can change an analysis's numbers (part of its key)

@@ -90,9 +90,9 @@ def release(directory) -> None:
         os.close(entry[0])                 # closing the descriptor releases the flock
 
 
-#: what Hydra, the lock and a sweep's job result (cliapp.jobresults) put in a run directory
-#: whether or not a run started
-SETUP_FILES = (".hydra", LOCK_NAME, "multirun.yaml", "job_result.json")
+#: what Hydra, the lock, a sweep's job result (cliapp.jobresults) and the run's copies of its
+#: inputs (protocols.record) put in a run directory whether or not a run started
+SETUP_FILES = (".hydra", LOCK_NAME, "multirun.yaml", "job_result.json", "config", "code.diff")
 
 
 def remove_if_unused(directory) -> bool:
