@@ -27,6 +27,7 @@ from pathlib import Path
 from tactile_flow.cliapp.heap import long_lived_frozen
 from tactile_flow.cliapp.runner import signals_received
 from tactile_flow.runstore import analyses, files, inflight, labelled, paths, rundir
+from tactile_flow.runstore.catalogue import register_quietly
 from tactile_flow.runstore.provenance import code_identity, git_state
 from tactile_flow.tactile import warmup
 
@@ -142,6 +143,8 @@ def _analyse_and_write(store_path: Path, cfg, console, name, force) -> dict:
 def _reuse(run_dir: Path, name: str, kept: Path, console) -> dict:
     """Make the kept analysis ``name`` current (same code, config and store); its summary."""
     analyses.make_current(run_dir, name)
+    if (run_dir / "run.json").is_file():
+        register_quietly(run_dir, console)
     summary = json.loads((kept / analyses.SUMMARY).read_text())
     console(f"analysis {run_dir}: {name} reused (made before with the same code, config and store; "
             f"force=true computes it again)")
@@ -207,6 +210,8 @@ def _analyse(store_path: Path, run, model, cfg, console, signals_before: int, na
         except BaseException:
             inflight.settle()                    # an interrupt may have left zarr writing into it
             raise
+    if (run_dir / "run.json").is_file():
+        register_quietly(run_dir, console)      # the catalogue shows its current analysis
     _report(console, run_dir, summary, score)
     return json.loads(text)
 

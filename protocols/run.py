@@ -23,6 +23,7 @@ from tactile_flow.hardware.errors import ConfigError
 from tactile_flow.tactile.frames import DEFAULT_VIEWS
 from tactile_flow.tactile.geometry import load_taxels
 from tactile_flow.runstore import RunStore, provenance, rundir, utc_now
+from tactile_flow.runstore.catalogue import register_quietly
 from tactile_flow.runstore.checksum import store_checksum
 from tactile_flow.tactile import warmup
 from tactile_flow.tactile.pipeline import TactileModel
@@ -114,6 +115,7 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
                 if screen:
                     screen.close()
                 outcome, stats = _close(run_dir, prov, recorder, monitor, lab, outcome)
+    register_quietly(run_dir, console)            # tactile-runs list finds it (its analysis updates it)
     return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)
 
 

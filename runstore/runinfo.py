@@ -80,13 +80,17 @@ def load(run_dir) -> dict:
 
 
 def flatten(node, prefix: str = "") -> dict:
-    """A nested config as ``{"protocol.sweep_speed": 10.0, ...}`` (lists kept as values)."""
+    """A nested config as ``{"protocol.sweep_speed": 10.0, "protocol.steps[3].sweep.speed": 10.0, ...}``
+    (lists of plain values kept as values)."""
     out = {}
     if isinstance(node, dict):
         for k, v in node.items():
             key = f"{prefix}.{k}" if prefix else str(k)
             if isinstance(v, dict) and v:
                 out.update(flatten(v, key))
+            elif isinstance(v, list) and v and any(isinstance(x, dict) for x in v):
+                for i, x in enumerate(v):          # protocol.steps[3].sweep.speed
+                    out.update(flatten(x, f"{key}[{i}]") if isinstance(x, dict) else {f"{key}[{i}]": x})
             else:
                 out[key] = v
     return out
@@ -128,7 +132,10 @@ def analysis_numbers(directory) -> dict:
     ``target_met.*``) of an analysis directory, flat."""
     directory = Path(directory)
     row = {}
-    for k, v in (_read(directory / analyses.SUMMARY).get("headline") or {}).items():
+    meta = analyses.read_meta(directory)                 # small; summary.json for analyses made before it
+    headline = meta["headline"] if isinstance(meta.get("headline"), dict) else \
+        _read(directory / analyses.SUMMARY).get("headline")
+    for k, v in (headline or {}).items():
         if isinstance(v, (int, float, str, bool)) or v is None:
             row[f"headline.{k}"] = _num(v)
     for k, v in _score_numbers(_read(directory / "score.json")).items():

@@ -100,6 +100,8 @@ def main(argv=None) -> int:
         return INTERRUPTED
     except BrokenPipeError:                    # tactile-runs list | head
         return 0
+    except Exception as exc:                   # noqa: BLE001 - one line; the traceback with --verbose
+        return _fail(args, exc, DIFFERS)
 
 
 def _fail(args, exc, code: int) -> int:
