@@ -137,7 +137,10 @@ def _report(exc: Exception, what: str, verbose: bool) -> None:
 
 def write_table(root: Path, rows: list[dict]) -> None:
     """``analysis_summary.csv`` and ``analysis_summary.md`` in ``root`` (never through a link:
-    :mod:`runstore.files`)."""
+    :mod:`runstore.files`): one row per analysis, nested values (the per-finger ``slip``) as
+    columns of their own (``slip.ff.slip_class``...), never a dict printed as text."""
+    from tactile_flow.runstore.runinfo import flatten
+    rows = [flatten(r) for r in rows]
     columns = list(dict.fromkeys(k for r in rows for k in r))
     text = io.StringIO()
     w = csv.DictWriter(text, fieldnames=columns)
@@ -150,7 +153,7 @@ def write_table(root: Path, rows: list[dict]) -> None:
                  for c in columns]
         lines.append("| " + " | ".join(cells) + " |")
     files.write_text(root, "analysis_summary.md", "\n".join(lines) + "\n")
-    print(f"summary of {len(rows)} runs: {root / 'analysis_summary.md'}")
+    print(f"summary of {len(rows)} analyses: {root / 'analysis_summary.md'}")
 
 
 class SummaryTable(jobresults.SweepResults):
@@ -160,8 +163,11 @@ class SummaryTable(jobresults.SweepResults):
 
     def summarise(self, config, results: list[dict]) -> None:
         rows = []
+        swept = _swept(results)
         for r in results:
-            rows += r["rows"]
+            params = {k: v for k, v in _params(r["overrides"]).items() if k in swept}
+            rows += [{"run": row["run"], **params, **{k: v for k, v in row.items() if k != "run"}}
+                     for row in r["rows"]]
             reported = {row["run"] for row in r["rows"]}
             why = (f"failed: its job ({r['job']}) left no result" if r["code"] is None
                    else f"not analysed: its job ({r['job']}) stopped before it")
@@ -171,6 +177,23 @@ class SummaryTable(jobresults.SweepResults):
                  for run in run_specs(config.hydra.overrides.task) if run not in reported]
         if rows:
             write_table(Path(config.hydra.sweep.dir), rows)
+
+
+def _params(overrides) -> dict:
+    """A job's overrides as ``{key: value}``, ``run=`` and ``batch=`` left out."""
+    out = {}
+    for o in overrides or []:
+        key, _, value = str(o).partition("=")
+        if key.lstrip("+~") not in ("run", "batch", "verbose"):
+            out[key.lstrip("+~")] = value
+    return out
+
+
+def _swept(results: list[dict]) -> list[str]:
+    """The override keys whose value differs between the sweep's jobs (a column each)."""
+    params = [_params(r["overrides"]) for r in results]
+    keys = list(dict.fromkeys(k for p in params for k in p))
+    return [k for k in keys if len({p.get(k) for p in params}) > 1]
 
 
 @hydra.main(config_path=str(CONF_DIR), config_name="analyze", version_base=None)

@@ -26,7 +26,7 @@ from omegaconf import OmegaConf
 
 import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import report
-from tactile_flow.runstore import RunStatus, analyses, files, paths, rundir
+from tactile_flow.runstore import RunStatus, analyses, files, paths, rundir, runinfo
 
 from .interrupts import Interrupts
 from .schema import check_targets, register
@@ -265,11 +265,12 @@ def _refuse_finished_sweep(directory) -> None:
 
 
 class SweepSummary(jobresults.SweepResults):
-    """At the end of a multirun, one table of every job that ran: overrides, status, headline
-    results, from the job directories on disk (any launcher).
+    """At the end of a multirun, one table of every job that ran: a column per swept
+    parameter, status, headline results, from the job directories on disk (any launcher);
+    and a figure of each headline metric against each swept parameter (:mod:`.sweepfig`).
 
-    Written to ``summary.csv`` and ``summary.md`` at the sweep's root directory; the sweep's
-    exit status is its highest job's (:mod:`cliapp.jobresults`).
+    Written to ``summary.csv``, ``summary.md`` and ``sweep.png`` at the sweep's root
+    directory; the sweep's exit status is its highest job's (:mod:`cliapp.jobresults`).
     """
 
     def summarise(self, config, results: list[dict]) -> None:
@@ -277,32 +278,60 @@ class SweepSummary(jobresults.SweepResults):
         rows = sweep_rows(root)
         if rows:
             write_summary(root, rows)
+            figure = ""
+            try:
+                from .sweepfig import sweep_figure
+                figure = ", sweep.png" if sweep_figure(root, rows, swept_columns(rows)) else ""
+            except Exception as exc:      # noqa: BLE001 - the table is the record; the figure a view of it
+                log.warning(f"sweep figure not drawn: {type(exc).__name__}: {exc}")
             unanalysed = sum(r["status"] == "success" and r["analysis"] != "complete" for r in rows) \
                 if config.get("analyze") else 0
             print(f"sweep {root}: {len(rows)} runs, {sum(r['status'] == 'success' for r in rows)} succeeded"
                   + (f", {unanalysed} of them not (completely) analysed" if unanalysed else "")
-                  + "; summary.md, summary.csv")
+                  + f"; summary.md, summary.csv{figure}")
+
+
+#: overrides that say how a sweep is shown, not what it varies
+QUIET_OVERRIDES = ("progress", "verbose", "resume", "analyze", "analysis.progress", "analysis.figures")
 
 
 def sweep_rows(root: Path) -> list[dict]:
-    """One row per job directory under ``root`` that holds a ``run.json``."""
+    """One row per job directory under ``root`` that holds a ``run.json``: ``job``, a column per
+    override (its key, ``protocol.sweep_speed``; :func:`swept_columns` says which vary),
+    ``status``, ``run_id``, ``error``, ``analysis`` (state), ``analysis_name`` and the
+    headline of its current analysis (``result.*``; a per-finger ``slip`` as
+    ``result.slip.<finger>.<field>`` columns)."""
     from . import resume
     rows = []
     for run_json in sorted(root.glob("*/run.json"), key=lambda p: _job_number(p.parent.name)):
         job = run_json.parent
         info = json.loads(run_json.read_text())
         overrides_file = job / ".hydra" / "overrides.yaml"
-        overrides = OmegaConf.load(overrides_file) if overrides_file.exists() else []
-        row = {"job": job.name, "overrides": " ".join(overrides), "status": info.get("status"),
-               "run_id": info.get("run_id"), "error": info.get("error") or "",
-               "analysis": resume.analysis_state(job)}
+        overrides = OmegaConf.load(overrides_file) if overrides_file.exists() else info.get("overrides") or []
+        row = {"job": job.name}
+        for o in overrides:
+            key, _, value = str(o).partition("=")
+            if key.lstrip("+~") not in QUIET_OVERRIDES:
+                row[key.lstrip("+~")] = value
+        row.update({"status": info.get("status"), "run_id": info.get("run_id"), "error": info.get("error") or "",
+                    "analysis": resume.analysis_state(job)})
         current = analyses.current_dir(job)
         if current is not None:                          # results only from a whole analysis
             row["analysis_name"] = analyses.current_name(job)
-            row.update({f"result.{k}": v for k, v in json.loads((current / analyses.SUMMARY).read_text())
-                        .get("headline", {}).items()})
+            headline = json.loads((current / analyses.SUMMARY).read_text()).get("headline", {})
+            row.update({f"result.{k}": v for k, v in runinfo.flatten(headline).items()})
         rows.append(row)
     return rows
+
+
+def swept_columns(rows: list[dict]) -> list[str]:
+    """The override columns whose value differs between the rows (every override column of a
+    one-job sweep): the sweep's parameters."""
+    fixed = {"job", "status", "run_id", "error", "analysis", "analysis_name"}
+    keys = [k for k in dict.fromkeys(k for r in rows for k in r) if k not in fixed and not k.startswith("result.")]
+    if len(rows) == 1:
+        return keys
+    return [k for k in keys if len({str(r.get(k)) for r in rows}) > 1]
 
 
 def _job_number(name: str) -> int:
@@ -311,10 +340,17 @@ def _job_number(name: str) -> int:
 
 
 def write_summary(root: Path, rows: list[dict]) -> None:
-    """``summary.csv`` and ``summary.md`` at the sweep's root (never through a link)."""
-    columns = list(dict.fromkeys(k for r in rows for k in r))
+    """``summary.csv`` and ``summary.md`` at the sweep's root (never through a link): the job,
+    a column per swept parameter, then status and results (overrides common to every job are
+    left out of the columns: they are in each job's ``.hydra/overrides.yaml``)."""
+    swept = swept_columns(rows)
+    fixed_overrides = {k for r in rows for k in r} - set(swept) - {"job", "status", "run_id", "error", "analysis",
+                                                                    "analysis_name"}
+    columns = ["job", *swept] + [k for k in dict.fromkeys(k for r in rows for k in r)
+                                 if k not in swept and k != "job" and
+                                 (k.startswith("result.") or k not in fixed_overrides)]
     text = io.StringIO()
-    writer = csv.DictWriter(text, fieldnames=columns)
+    writer = csv.DictWriter(text, fieldnames=columns, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(rows)
     files.write_text(root, "summary.csv", text.getvalue())

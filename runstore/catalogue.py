@@ -206,7 +206,7 @@ class Catalogue:
         fields["sweep"] = sweep
         fields["dirty"] = None if row.get("dirty") is None else str(row.get("dirty")).lower()
         fields["seed"] = None if row.get("seed") is None else str(row.get("seed"))
-        slim = {k: v for k, v in row.items() if not k.startswith("config.")}
+        slim = {**{k: v for k, v in row.items() if not k.startswith("config.")}, "sweep": sweep}
         self.db.execute("DELETE FROM kv WHERE path = ?", (path,))
         self.db.execute("DELETE FROM run_analyses WHERE path = ?", (path,))
         cols = ", ".join(f'"{c}"' for c in FIELDS)

@@ -23,8 +23,9 @@ import os
 import re
 from pathlib import Path
 
-#: characters kept in a slug; anything else becomes ``_``
-_UNSAFE = re.compile(r"[^A-Za-z0-9._+=,@-]+")
+#: characters kept in a slug; anything else becomes ``_`` (no ``=`` or ``,``: a run directory's path is
+#: typed into Hydra overrides, ``run=PATH``, where they would be syntax)
+_UNSAFE = re.compile(r"[^A-Za-z0-9._+@-]+")
 MAX_COMPONENT = 120              # characters; a file system allows 255 bytes, a date and job number are added
 
 
@@ -33,7 +34,7 @@ class PathOutsideRoot(ValueError):
 
 
 def slug(text, max_len: int = MAX_COMPONENT) -> str:
-    """``text`` as one path component: characters other than letters, digits and ``._+=,@-``
+    """``text`` as one path component: characters other than letters, digits and ``._+@-``
     become ``_`` (a ``/`` or ``..`` can never survive), no leading dot or dash; longer than
     ``max_len``: cut, with 8 hex digits of its SHA-256 so that two long names stay apart.
     Empty text is ``_``."""
@@ -91,9 +92,25 @@ def template_root(template: str) -> str:
     return str(Path(*parts[:first])) if first else "."
 
 
+def run_name(protocol, surface="", overrides="") -> str:
+    """A run directory's name after its time or job number: ``straws_sweep_on_sticks_hardware.
+    seed-3_protocol.sweep_speed-20`` — the protocol, the surface it ran on, and the overrides
+    that made it (Hydra's ``override_dirname``), as one :func:`slug`: what differs between the
+    runs of a sweep is in their names."""
+    parts = [str(protocol)]
+    if surface not in ("", None, "None"):
+        parts += ["on", str(surface)]
+    if overrides not in ("", None):
+        parts.append(str(overrides))
+    return slug("_".join(parts))
+
+
 def register_resolvers() -> None:
-    """``${tf_name:...}``: the :func:`slug` of its arguments joined by ``_`` (for the run and
-    sweep directory names of ``conf/config.yaml``). Call before Hydra composes."""
+    """``${tf_name:...}`` (the :func:`slug` of its arguments joined by ``_``) and
+    ``${tf_run_name:protocol,surface,overrides}`` (:func:`run_name`), for the run and sweep
+    directory names of ``conf/config.yaml``. Call before Hydra composes."""
     from omegaconf import OmegaConf
     if not OmegaConf.has_resolver("tf_name"):
         OmegaConf.register_new_resolver("tf_name", lambda *parts: slug("_".join(str(p) for p in parts if p != "")))
+    if not OmegaConf.has_resolver("tf_run_name"):
+        OmegaConf.register_new_resolver("tf_run_name", run_name)

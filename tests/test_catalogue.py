@@ -223,3 +223,57 @@ def test_a_real_run_and_its_analyses_register_themselves(tmp_path):
                           "name=second"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     assert ana.returncode == 0, ana.stderr
     assert Catalogue.open(cat).query(["analysis=second"])[0]["analysis"] == "second"
+
+
+# ----------------------------------------------------------------------------- sweeps a researcher can read
+def test_run_directory_names_say_what_the_run_is_and_stay_typeable():
+    from tactile_flow.runstore.paths import run_name
+    name = run_name("straws_sweep", "tall_sticks", "hardware.seed-3_protocol.sweep_speed-20")
+    assert name == "straws_sweep_on_tall_sticks_hardware.seed-3_protocol.sweep_speed-20"
+    odd = run_name("p", "", "protocol.steps-[{wait: {duration: 0.2}}]")
+    assert not set("=,[]{}: ") & set(odd)                # a path typed as run=PATH needs no quotes
+
+
+def test_the_analysis_table_gives_the_slip_of_each_finger_columns_of_its_own(tmp_path):
+    """Before: the ``slip`` column of ``analysis_summary.*`` was a Python dict printed as text."""
+    from tactile_flow.analysis.cli import write_table
+    slip = {"ff": {"slip_class": "translation", "slip_direction_sensor_deg": 92.5, "slip_displacement_mm": 2.1},
+            "th": {"slip_class": "none", "slip_direction_sensor_deg": None, "slip_displacement_mm": 0.1}}
+    write_table(tmp_path, [{"run": "a", "analysis": "x", "result": "analysed", "segments": 4, "slip": slip},
+                           {"run": "b", "analysis": "y", "result": "analysed", "segments": 5}])
+    import pandas as pd
+    df = pd.read_csv(tmp_path / "analysis_summary.csv")
+    assert "slip" not in df.columns and df.loc[0, "slip.ff.slip_class"] == "translation"
+    assert df.loc[0, "slip.ff.slip_direction_sensor_deg"] == 92.5 and df.loc[1, "slip.ff.slip_class"] != "translation"
+    md = (tmp_path / "analysis_summary.md").read_text()
+    assert "{" not in md and "slip.th.slip_class" in md.splitlines()[0]
+
+
+@pytest.mark.slow
+def test_a_sweep_has_a_column_per_parameter_a_figure_and_names_that_say_what_differs(tmp_path):
+    cat = tmp_path / "runs.sqlite"
+    env = {**os.environ, "TACTILE_CATALOGUE": str(cat)}
+    proc = subprocess.run([sys.executable, "-c", "from tactile_flow.protocols.entry import main; main()", "-m",
+                           "progress=false", "analysis.progress=false", "analysis.figures=false",
+                           "protocol.sweep_speed=10,20", "hardware.seed=0,1", f"hydra.sweep.dir={tmp_path / 'sweep'}",
+                           "hydra/launcher=joblib", "hydra.launcher.n_jobs=2"], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    jobs = sorted(p.parent.name for p in (tmp_path / "sweep").glob("*/run.json"))
+    assert jobs == ["0_straws_sweep_on_straws_hardware.seed-0_protocol.sweep_speed-10",
+                    "1_straws_sweep_on_straws_hardware.seed-1_protocol.sweep_speed-10",
+                    "2_straws_sweep_on_straws_hardware.seed-0_protocol.sweep_speed-20",
+                    "3_straws_sweep_on_straws_hardware.seed-1_protocol.sweep_speed-20"]
+    import pandas as pd
+    table = pd.read_csv(tmp_path / "sweep" / "summary.csv")
+    assert list(table.columns[:3]) == ["job", "protocol.sweep_speed", "hardware.seed"]
+    assert sorted(table["protocol.sweep_speed"]) == [10, 10, 20, 20] and "overrides" not in table.columns
+    assert "progress" not in table.columns and table["result.score_width_error_mm_median"].notna().all()
+    assert (tmp_path / "sweep" / "sweep.png").stat().st_size > 20_000 and "sweep.png" in proc.stdout
+    rows = Catalogue.open(cat).query(["protocol.sweep_speed=20", "hardware.seed=1"])
+    assert len(rows) == 1 and rows[0]["sweep"] == str((tmp_path / "sweep").resolve())
+    moved = tmp_path / "renamed_by_hand"                              # a name that says nothing
+    shutil.move(tmp_path / "sweep" / jobs[3], moved)
+    shown = runs_cli("show", str(moved), cwd=tmp_path, catalogue=cat).stdout
+    assert "protocol    straws_sweep  on surface straws" in shown
+    assert "protocol.sweep_speed=20" in shown and "hardware.seed=1" in shown
