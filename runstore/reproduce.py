@@ -31,6 +31,7 @@ import hashlib
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
 from dataclasses import dataclass, field
@@ -210,7 +211,7 @@ def _close_enough(key: str, a, b) -> bool:
         return True
     if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in (a, b)):
         return False
-    leaf = key.split(".", 1)[1]
+    leaf = key.split(".", 1)[1].removeprefix("score_")      # the headline repeats score numbers as score_*
     if leaf in TOLERANCES:
         return abs(a - b) <= TOLERANCES[leaf]
     return abs(a - b) <= RELATIVE_TOLERANCE * max(abs(a), abs(b), 1e-12)
@@ -287,15 +288,18 @@ def _run_one(run_dir: Path, info: dict, out: Path, differs: str | None, console)
                                                  "code_changed": differs,
                                                  "store_sha256": (info.get("store_checksum") or {}).get("sha256")})
     console(f"reproduce {run_dir}: tactile-run {' '.join(argv[3:])}" + (f" (code changed: {differs})" if differs else ""))
+    proc = subprocess.Popen(argv, cwd=cwd, env=env)
     try:
-        proc = subprocess.run(argv, cwd=cwd, env=env)
-    except KeyboardInterrupt:
+        returncode = proc.wait()
+    except KeyboardInterrupt:                       # the run stops safely on its own SIGINT, never killed
+        proc.send_signal(signal.SIGINT)
+        _wait_through_signals(proc)
         console(f"reproduce {run_dir}: interrupted")
         return 3
-    if proc.returncode == 3 and not runinfo.is_run_dir(out):
+    if returncode == 3 and not runinfo.is_run_dir(out):
         return 3
     if not runinfo.is_run_dir(out):
-        console(f"reproduced: failed: tactile-run ended with exit status {proc.returncode} and recorded nothing "
+        console(f"reproduced: failed: tactile-run ended with exit status {returncode} and recorded nothing "
                 f"(its line above says why)")
         return 1
     result = compare(run_dir, out, info)
@@ -303,6 +307,16 @@ def _run_one(run_dir: Path, info: dict, out: Path, differs: str | None, console)
         result.notes.append("on another code version (--allow-code-change; both recorded in the new run.json)")
     console(f"{out}: " + result.line())
     return 0 if result.reproduced else 1
+
+
+def _wait_through_signals(proc) -> None:
+    """Wait for the run to end (its safe stop, its store closed), whatever more signals come."""
+    while True:
+        try:
+            proc.wait()
+            return
+        except KeyboardInterrupt:
+            proc.send_signal(signal.SIGINT)         # a second Ctrl-C: the run's own "stop at once"
 
 
 def _reproduce_sweep(sweep: Path, out, allow_code_change: bool, console, verify_store: bool) -> int:

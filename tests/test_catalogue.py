@@ -277,3 +277,22 @@ def test_a_sweep_has_a_column_per_parameter_a_figure_and_names_that_say_what_dif
     shown = runs_cli("show", str(moved), cwd=tmp_path, catalogue=cat).stdout
     assert "protocol    straws_sweep  on surface straws" in shown
     assert "protocol.sweep_speed=20" in shown and "hardware.seed=1" in shown
+
+
+def test_a_real_lab_reproduction_is_judged_against_stated_tolerances(tmp_path):
+    """On the real lab the world is not the same twice: the headline and score numbers are
+    compared against runstore.reproduce.TOLERANCES, not bit for bit."""
+    from tactile_flow.runstore import reproduce
+
+    def lab_run(name, width_error):
+        d = make_run(tmp_path / name, width_error=width_error)
+        info = json.loads((d / "run.json").read_text())
+        info["config"]["hardware"]["backend"] = "lab"
+        (d / "run.json").write_text(json.dumps(info))
+        return d
+    original = lab_run("original", 0.5)
+    close = reproduce.compare(original, lab_run("close", 0.8))
+    assert close.real_lab and close.reproduced and close.line().startswith("reproduced: within tolerance")
+    far = reproduce.compare(original, lab_run("far", 1.9))
+    assert not far.reproduced and "score.width_error_mm_median 0.5 -> 1.9" in far.line()
+    assert far.line().startswith("reproduced: outside tolerance")
