@@ -79,6 +79,12 @@ def code_state(root: Path = PROJECT_ROOT, paths: tuple[str, ...] = CODE_PATHS) -
         untracked = [u for u in _git(root, "ls-files", "--others", "--exclude-standard", "-z", "--", *paths)
                      .decode().split("\0") if u]
     except (OSError, subprocess.SubprocessError, ValueError):
+        from tactile_flow import build_info          # an installed wheel: the commit it was built from
+        built = build_info() if root == PROJECT_ROOT else {}
+        if built.get("from") == "build":
+            return {"package": pkg, "commit": built.get("commit", UNKNOWN), "dirty": built.get("dirty", UNKNOWN),
+                    "diff_sha256": None if built.get("dirty") is False else UNKNOWN, "untracked_left_out": [],
+                    "from": "build"}, b""
         return {"package": pkg, "commit": UNKNOWN, "dirty": UNKNOWN, "diff_sha256": UNKNOWN,
                 "untracked_left_out": []}, b""
     left_out = []
