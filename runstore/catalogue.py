@@ -65,11 +65,12 @@ def default_path() -> Path:
 
 def _roots_of(run_dir: Path) -> Path:
     """The root a run lives under: its nearest ``outputs``/``multirun``/``imported`` ancestor,
-    else its parent (what ``index`` walks again to notice moved and deleted runs)."""
+    else the run directory itself (never a parent that may be a home directory): what
+    ``index`` walks again to notice new, moved and deleted runs."""
     for parent in run_dir.parents:
         if parent.name in ("outputs", "multirun", "imported"):
             return parent
-    return run_dir.parent
+    return run_dir
 
 
 def _value(v) -> tuple[float | None, str | None]:
@@ -172,7 +173,7 @@ class Catalogue:
         side = Path(f"{self.path}.roots")
         if side.is_file():
             roots |= {line.strip() for line in side.read_text().splitlines() if line.strip()}
-        return sorted(r for r in roots if Path(r).is_dir())
+        return sorted(roots)
 
     def _add_root(self, root: Path) -> None:
         root = str(root.resolve())
@@ -245,7 +246,7 @@ class Catalogue:
             for r in roots:
                 if not r.is_dir():
                     raise CatalogueError(f"index {r}: no such directory; expected a directory of runs")
-        else:
+        else:                                        # a root deleted since: its runs are gone
             roots = [Path(p) for p in self.known_roots()] or [p for p in (Path("outputs"), Path("multirun"))
                                                                if p.is_dir()]
         if rebuild:
@@ -266,7 +267,7 @@ class Catalogue:
                 bad.append(str(exc))
         walked = [str(r.resolve()) for r in roots]
         gone = [p for p in known if p not in found and any(p == w or p.startswith(w + os.sep) for w in walked)
-                and not Path(p).is_dir()]
+                and not runinfo.is_run_dir(p)]
         new_ids = {row["run_id"]: row["path"] for _, row, _, _ in pending}
         moved = [(p, new_ids[known[p][1]]) for p in gone if known[p][1] in new_ids]
 
@@ -278,7 +279,10 @@ class Catalogue:
                 for table in ("runs", "kv", "run_analyses"):
                     self.db.execute(f"DELETE FROM {table} WHERE path = ?", (p,))
             for r in roots:
-                self._add_root(r)
+                if r.is_dir():
+                    self._add_root(r)
+                else:
+                    self.db.execute("DELETE FROM roots WHERE path = ?", (str(r.resolve()),))
         self._write(write)
         for line in bad[:5]:
             console(f"index: skipped {line}")

@@ -41,23 +41,23 @@ EPILOG = """examples:
   tactile-runs reproduce RUN_DIR                       the run again: reproduced: identical, or what differs
   tactile-runs reproduce SWEEP_DIR                     every job of a sweep
 
-catalogue: --catalogue FILE, or $TACTILE_CATALOGUE; default: the first of ./outputs/, ./multirun/
-that exists holds none: <cwd>/.tactile-runs.sqlite (beside outputs/ and multirun/ of the lab's
-working directory). Guide: docs/reproducibility.md."""
+catalogue: --catalogue FILE, else $TACTILE_CATALOGUE, else runs.sqlite in the tactile-flow cache
+directory ($TACTILE_CACHE_DIR, else ~/.cache/tactile-flow): one per user, on a local disk.
+Guide: docs/reproducibility.md."""
 
 
 def parser():
     from tactile_flow.validation.cli import ArgumentParser
     doc = __doc__.replace("``", "")
     ap = ArgumentParser(prog="tactile-runs", description=doc.split("\nFilters")[0], epilog=EPILOG)
-    ap.add_argument("--catalogue", metavar="FILE", help="the catalogue file (default: $TACTILE_CATALOGUE or "
-                                                         "./.tactile-runs.sqlite)")
+    ap.add_argument("--catalogue", metavar="FILE", help="the catalogue file (default: $TACTILE_CATALOGUE, else "
+                                                         "runs.sqlite in the tactile-flow cache directory)")
     ap.add_argument("--verbose", action="store_true", help="tracebacks on errors")
     sub = ap.add_subparsers(dest="command", metavar="{list,show,diff,reproduce,index}")
     sub.required = True
     p = sub.add_parser("list", help="runs matching filters, as a table, CSV or JSON",
-                       description="Runs matching every FILTER (" + doc.split("Filters (``list``), all of them must hold:")[-1]
-                       .split("Exit status")[0].strip() + ")", formatter_class=ap.formatter_class)
+                       description="Runs matching every FILTER:\n" + doc.split("all of them must hold:")[-1]
+                       .split("Exit status")[0].rstrip(), formatter_class=ap.formatter_class)
     p.add_argument("filters", nargs="*", metavar="FILTER", help="key=value, key>=number, since=DATE ...")
     p.add_argument("--format", choices=("table", "csv", "json"), default="table", help="output format (default table)")
     p.add_argument("--columns", metavar="A,B,...", help="columns to show (default: a summary; 'all' for every one)")

@@ -296,3 +296,15 @@ def test_a_real_lab_reproduction_is_judged_against_stated_tolerances(tmp_path):
     far = reproduce.compare(original, lab_run("far", 1.9))
     assert not far.reproduced and "score.width_error_mm_median 0.5 -> 1.9" in far.line()
     assert far.line().startswith("reproduced: outside tolerance")
+
+
+def test_a_run_outside_any_outputs_folder_is_its_own_root_and_its_deletion_is_noticed(tmp_path):
+    """A run made with hydra.run.dir=somewhere: ``index`` walks that run, never its parent
+    (which may be a home directory), and notices when it is gone."""
+    cat = Catalogue.open(tmp_path / "runs.sqlite")
+    run = make_run(tmp_path / "home" / "exp1")
+    (tmp_path / "home" / "big_unrelated_tree").mkdir()
+    cat.register(run)
+    assert cat.known_roots() == [str(run.resolve())]
+    shutil.rmtree(run)
+    assert "1 gone" in cat.index(None, console=lambda *_: None) and cat.query([]) == []
