@@ -112,15 +112,24 @@ def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
             code = max(code, BAD_INPUT)
         except Exception as exc:  # noqa: BLE001 - one line per failed run, keep going
             if signals_received():  # a Ctrl-C cut a library's code short and its cleanup raised this
+                _quiet_after_interrupt()
                 return _interrupted(store, rows)
             _report(exc, f"analysis of {store} failed", verbose)
             row["result"] = f"failed: {type(exc).__name__}: {exc}"
             code = max(code, FAILED)
         except KeyboardInterrupt:  # Ctrl-C or SIGTERM: stop here; the analysis leaves no partial files
+            _quiet_after_interrupt()
             return _interrupted(store, rows)
     if table and len(stores) > 1:
         write_table(table_dir(spec), rows)
     return code, rows
+
+
+def _quiet_after_interrupt() -> None:
+    """An interrupt inside zarr's event loop leaves coroutines never awaited; their
+    ``RuntimeWarning`` at collection would add lines under the one that says what happened."""
+    import warnings
+    warnings.filterwarnings("ignore", message=r"coroutine .* was never awaited", category=RuntimeWarning)
 
 
 def _interrupted(store: Path, rows: list[dict]) -> tuple[int, list[dict]]:

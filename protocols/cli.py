@@ -79,8 +79,11 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
         _refuse_parallel_hardware(cfg, hc)
         decision = "run"
         if cfg.resume and not cfg.plan_only:
+            config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
+            if hc.mode == RunMode.MULTIRUN:
+                resume.check_job_siblings(hc.sweep.dir, hc.job.num, run_dir, config_yaml)
             with interrupts.during("writing"):        # an earlier attempt may be moved aside
-                decision = resume.decide(run_dir, OmegaConf.to_yaml(cfg, resolve=True), analyze=cfg.analyze)
+                decision = resume.decide(run_dir, config_yaml, analyze=cfg.analyze)
         if decision == "run" and not cfg.plan_only:
             with interrupts.during("writing"):
                 record_config(run_dir, cfg)

@@ -51,12 +51,7 @@ def decide(run_dir, config_yaml: str, git: dict | None = None, analyze: bool = F
     if info.get("status") != "success":
         _set_aside(run_dir)
         return "run"
-    before, now = comparable_config(info.get("config_yaml", "")), comparable_config(config_yaml)
-    if before != now:
-        diff = "".join(difflib.unified_diff(before.splitlines(True), now.splitlines(True),
-                                            "recorded run", "this job", n=1))
-        raise ResumeMismatch(f"resume: {run_dir} was run with another config; refusing to mix them in one "
-                             f"sweep:\n{diff}")
+    check_same_config(run_dir, info, config_yaml)
     git = git_state() if git is None else git
     recorded = info.get("git", {})
     for key in ("commit", "diff_sha256"):
@@ -64,6 +59,26 @@ def decide(run_dir, config_yaml: str, git: dict | None = None, analyze: bool = F
             raise ResumeMismatch(f"resume: {run_dir} was run with code {key} {recorded.get(key)}, this job "
                                  f"would run {git.get(key)}; refusing to mix code versions in one sweep")
     return "analyse" if analyze and analysis_state(run_dir) != "complete" else "skip"
+
+
+def check_same_config(run_dir: Path, info: dict, config_yaml: str) -> None:
+    """:class:`ResumeMismatch` showing the difference if the run recorded in ``run_dir``
+    (``info``: its ``run.json``) was run with another config than ``config_yaml``."""
+    before, now = comparable_config(info.get("config_yaml", "")), comparable_config(config_yaml)
+    if before != now:
+        diff = "".join(difflib.unified_diff(before.splitlines(True), now.splitlines(True),
+                                            "recorded run", "this job", n=1))
+        raise ResumeMismatch(f"resume: {run_dir} was run with another config; refusing to mix them in one "
+                             f"sweep:\n{diff}")
+
+
+def check_job_siblings(sweep_dir, job_num: int, run_dir, config_yaml: str) -> None:
+    """A resumed sweep whose job ``job_num`` now has another directory name (run directories are
+    named by their overrides) must not add a run of another config beside the earlier one:
+    :class:`ResumeMismatch` if a ``<job_num>_*`` directory holds a run of another config."""
+    for sibling in sorted(Path(sweep_dir).glob(f"{job_num}_*")):
+        if sibling != Path(run_dir) and (sibling / "run.json").is_file():
+            check_same_config(sibling, json.loads((sibling / "run.json").read_text()), config_yaml)
 
 
 def analysis_state(run_dir) -> str:
