@@ -91,7 +91,8 @@ class Condition:
                   f"protocol.rotation_speed_deg_s={self.rotation_speed_deg_s}",
                   f"hardware.stage.tremor_tau_s={self.tremor_tau_s}"]
             if any(self.tilt_deg):
-                o.append(f"hardware.fingertips.ff=[0.0,0.0,0.0,{','.join(f'{v:.9f}' for v in tilted_tip(*self.tilt_deg))}]")
+                tip = ",".join(f"{v:.9f}" for v in tilted_tip(*self.tilt_deg))
+                o.append(f"hardware.fingertips.ff=[0.0,0.0,0.0,{tip}]")
         return o
 
     def tremor_overrides(self, noise: float) -> list[str]:
@@ -109,9 +110,10 @@ def tilted_tip(pitch_deg: float, roll_deg: float) -> list[float]:
     """Rotation vector of the fingertip in the TCP (``hardware.fingertips.ff[3:]``) pitched by
     ``pitch_deg`` about the sensor's y and rolled by ``roll_deg`` about its x (the default,
     π about x, turns the pad down)."""
-    from scipy.spatial.transform import Rotation
-    r = (Rotation.from_rotvec([math.pi, 0.0, 0.0]) * Rotation.from_euler("yx", [pitch_deg, roll_deg], degrees=True))
-    return r.as_rotvec().tolist()
+    from tactile_flow.hardware.transforms import matrix_to_rotvec, rotvec_to_matrix
+    pitch = rotvec_to_matrix([0.0, math.radians(pitch_deg), 0.0])
+    roll = rotvec_to_matrix([math.radians(roll_deg), 0.0, 0.0])
+    return matrix_to_rotvec(rotvec_to_matrix([math.pi, 0.0, 0.0]) @ roll @ pitch).tolist()
 
 
 def conditions(directions=DIRECTIONS_DEG, rotations=ROTATIONS_DEG, forces=tuple(PRESS_FORCES.values()),
@@ -125,7 +127,8 @@ def conditions(directions=DIRECTIONS_DEG, rotations=ROTATIONS_DEG, forces=tuple(
 def varied_conditions(n: int = 120, seed: int = 33, tares=(True, False)) -> list[Condition]:
     """``n`` conditions drawn deterministically (``seed``) for slips that look like a researcher's
     (module docstring): motions in the classic grid's proportions (6 directions, now anywhere on
-    the circle; both senses; touches), forces 1–4.5 N (firmer presses of a pitched finger bottom its electrodes out: the interlock stops them), both objects, with and without tare,
+    the circle; both senses; touches), forces 1–4.5 N (firmer presses of a tilted finger bottom its
+    electrodes out: the interlock stops them), both objects, with and without tare,
     the contact up to 15° off the pole, pulls of 1.5–6 mm at 2–15 mm/s, twists of 15–45° at
     15–90 deg/s, the holder's tremor ×0.5–3 and, for a third of the runs, a slow wander of the
     press."""
@@ -141,7 +144,8 @@ def varied_conditions(n: int = 120, seed: int = 33, tares=(True, False)) -> list
             press_force=float(np.round(rng.uniform(1.0, 4.5), 2)), surface=str(rng.choice(OBJECTS)),
             tare=bool(tares[i % len(tares)]), tilt_deg=_tilt(rng),
             speed_mm_s=float(np.round(rng.uniform(2, 15), 1)), distance_mm=float(np.round(rng.uniform(1.5, 6), 1)),
-            rotation_speed_deg_s=float(np.round(rng.uniform(15, 90), 0)), tremor=float(np.round(rng.uniform(0.5, 3), 2)),
+            rotation_speed_deg_s=float(np.round(rng.uniform(15, 90), 0)),
+            tremor=float(np.round(rng.uniform(0.5, 3), 2)),
             tremor_tau_s=float(np.round(rng.uniform(0.03, 0.8), 2)),
             wander_mm=float(np.round(rng.uniform(0.03, 0.15), 3)) if i % 3 == 0 else 0.0))
     return out

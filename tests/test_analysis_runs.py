@@ -212,3 +212,11 @@ def test_static_flow_only_where_an_estimate_reads_it(runs, tmp_path):
     during = next(s for s in auto["segments"] if s["label"] == "during")
     assert "bottom/static" in during["flow"] and "left/static" not in during["flow"]
     assert "left/dynamic" in during["flow"]
+
+
+def test_sweeps_and_pour_write_only_documented_fields(runs, tmp_path):
+    """Every field of their summary.json is in docs/analysis.md's table (tests/test_summary_fields.py)."""
+    from test_summary_fields import undocumented
+    for proto, store in runs.items():
+        summary = analyze_run(_copy(store, tmp_path, proto), {"progress": False}, console=lambda *a: None)
+        assert undocumented(summary) == [], proto

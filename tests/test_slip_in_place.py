@@ -352,4 +352,8 @@ def test_the_analysis_reads_the_slip_and_meets_its_targets(cli_runs, kind, tare,
                                      "touch_vs_slip_correct_fraction", "contact_found_fraction"}
     slip = summary["estimates"]["slip"]["ff"]
     assert slip["slip_class"] == {"translate": "translation", "rotate": "rotation", "none": "none"}[kind]
-    assert slip["reference"] == ("contact_onset" if tare else "unloaded")
+    assert slip["reference"] == ("contact_onset" if tare else "first_settled")
+    if kind == "none":
+        assert slip["slip_onset_s"] is None and slip["slip_direction_sensor_deg"] is None
+    else:                                      # dated within 50 ms of the skin's breakaway
+        assert abs(score["object_motions"][0]["slip_onset_error_ms"]) <= 50.0, score["object_motions"][0]
