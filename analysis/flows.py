@@ -254,6 +254,6 @@ def combined_flow_px(cf: ContactFlow, start: int, stop: int, model, rate_hz: flo
         w = window_summary(cf, v, start, stop, model, rate_hz, "dynamic")
         if w is not None:
             c = max(w["confidence"], 1e-3)
-            total += c * w["magnitude"] / (model.plans[v].mm_per_px * rate_hz)
+            total += c * w["magnitude"]                     # tagg.window's magnitude: px/frame
             weight += c
     return total / weight if weight > 0 else None

@@ -17,8 +17,8 @@ Prints JSON lines (per condition cell: tare/no tare × light/firm; the totals; t
 real touches), then markdown tables (docs/analysis.md):
 
 - the confusion matrix of the shipped estimate over the true motion (each translation
-  direction, each rotation sense, touch) and what it was read as (a translation binned to the
-  grid's nearest direction, a rotation by its sense, touch), per cell and over all;
+  direction, each rotation sense, touch) and what it was read as (translations, true and read,
+  binned to the nearest of 0°, 60°, … 300°; a rotation by its sense; touch), per cell and over all;
 - per evidence source, the shipped decision with that source alone in its place: the
   direction of translations from ``motion`` (the centre of pressure since the first settled
   frames), ``cop_unloaded``, ``static_unloaded`` (negated), ``static_onset``, ``dynamic``; the
@@ -84,9 +84,11 @@ def evaluate(store: Path, model, cfg):
     return row, a.slips.get(row.get("segment"))
 
 
-def true_label(c) -> str:
+def true_label(c, bins=None) -> str:
+    """The truth in the confusion matrix's terms (a translation binned to ``bins`` if given)."""
     if c.motion == "translate":
-        return f"translate {c.direction_deg % 360:.0f}°"
+        d = c.direction_deg if bins is None else min(bins, key=lambda b: angle_error(c.direction_deg, b))
+        return f"translate {d % 360:.0f}°"
     if c.motion == "rotate":
         return "rotate ccw" if c.rotation_deg > 0 else "rotate cw"
     return "touch"
@@ -144,7 +146,7 @@ def summarise(rows, cfg, bins) -> dict:
         right = defaultdict(list)
         for c, tr, est in rows:
             cls, direction, rotation = reread(est, cfg.slip, **kw)
-            truth = true_label(c)
+            truth = true_label(c, bins)
             got = read_label(cls, direction, rotation, bins)
             right[c.motion].append(got == truth if c.motion != "translate" else
                                    (cls == "translation" and direction is not None
@@ -170,7 +172,7 @@ def confusion(rows, cfg, bins) -> tuple[list[str], Counter]:
     counts = Counter()
     for c, tr, est in rows:
         cls, direction, rotation = reread(est, cfg.slip)
-        counts[(true_label(c), read_label(cls, direction, rotation, bins))] += 1
+        counts[(true_label(c, bins), read_label(cls, direction, rotation, bins))] += 1
     return labels, counts
 
 
@@ -224,7 +226,7 @@ def main(argv=None) -> None:
         for c, store in runs(args.out, args.grid, noise, args.quick):
             tr, est = evaluate(store, model, cfg)
             everything.append((noise, c, tr, est))
-            print(json.dumps({"run": c.name, "noise": noise, "truth": true_label(c),
+            print(json.dumps({"run": c.name, "noise": noise, "truth": true_label(c, bins),
                               "read": read_label(*reread(est, cfg.slip), bins),
                               "onset_error_ms": None if not est or est.get("slip_onset_s") is None
                               or not math.isfinite(tr.get("true_slip_onset_s", float("nan")))

@@ -62,6 +62,9 @@ def test_sweep_labels_estimates_and_score(runs, proto, tmp_path):
     assert set(tree["aggregates"]["view"].values) == {"bottom", "left", "right"}
     assert tree["estimates/crossings"]["width"].attrs["units"] == "mm"
     assert "headline" in summary and summary["headline"]["crossings"] == 3
+    # the pattern's flow in the frames, px/frame: not a speed (docs/analysis.md), and not called one
+    for c in summary["estimates"]["crossings"]:
+        assert 0.01 < c["flow_px_per_frame"] < 1.0 and "flow_speed_mm_s" not in c
 
 
 def test_pour_phases(runs, tmp_path):
