@@ -82,39 +82,42 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
     with (interrupts.installed() if own else nullcontext()), rundir.locked(run_dir), lab:
         prov = provenance.collect(OmegaConf.to_yaml(cfg, resolve=True), list(overrides), lab.identities(),
                                   _calibration(lab), cfg.hardware.get("seed"), protocol=plan.protocol)
-        with interrupts.during("writing"):          # from the store's creation to run.json: no signal raises
-            prov.update(_reproducible(run_dir, cfg))
-            store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
-                                    run_id=prov["run_id"], provenance=provenance.summary(prov),
-                                    attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
-                                           "tare": bool(cfg.protocol.get("tare", True))},
-                                    live=(live_fingers(live, lab.biotac.fingers), model.config.views)
-                                    if model else None, streams=lab.streams())
-            stored = store_baseline(store, baseline, lab.biotac.fingers)
-            if getattr(lab, "truth", None) is not None:
-                lab.truth.conditions = _conditions(cfg, lab, stored, plan)
-            recorder = Recorder(store, lab.sources(), lab.clock)
-            monitor, outcome = None, Outcome(FAILED, "the run engine could not start")
-            screen = ProgressConsole() if cfg.progress else None
-            try:
-                with long_lived_frozen():      # shorter collector pauses while the readers run
-                    if not plan.setup:
-                        recorder.start()
-                    if model:
-                        viewer = open_viewer(live.viewer, live_fingers(live, lab.biotac.fingers), model, run_dir, console)
-                        monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
-                                              display=screen.live_line() if screen else terminal_display(),
-                                              viewer=viewer)
-                    outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=screen.bar if screen else None,
-                                        log=console,
-                                        live=monitor, interrupts=interrupts).run(
-                        start_recording=recorder.start if plan.setup else None)
-            except Exception as exc:              # the engine never raises past its safe stop; this is the rest
-                outcome = Outcome(FAILED, f"{type(exc).__name__}: {exc}")
-            finally:
-                if screen:
-                    screen.close()
-                outcome, stats = _close(run_dir, prov, recorder, monitor, lab, outcome)
+        # From the store's creation to the job's end no signal raises: the engine stops the run
+        # safely on one, and the store, run.json, the devices' close and the catalogue entry are
+        # written whole (a signal raised on the way out would report a closed run as never started).
+        interrupts.phase = "writing"
+        prov.update(_reproducible(run_dir, cfg))
+        store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
+                                run_id=prov["run_id"], provenance=provenance.summary(prov),
+                                attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
+                                       "tare": bool(cfg.protocol.get("tare", True))},
+                                live=(live_fingers(live, lab.biotac.fingers), model.config.views)
+                                if model else None, streams=lab.streams())
+        stored = store_baseline(store, baseline, lab.biotac.fingers)
+        if getattr(lab, "truth", None) is not None:
+            lab.truth.conditions = _conditions(cfg, lab, stored, plan)
+        recorder = Recorder(store, lab.sources(), lab.clock)
+        monitor, outcome = None, Outcome(FAILED, "the run engine could not start")
+        screen = ProgressConsole() if cfg.progress else None
+        try:
+            with long_lived_frozen():      # shorter collector pauses while the readers run
+                if not plan.setup:
+                    recorder.start()
+                if model:
+                    viewer = open_viewer(live.viewer, live_fingers(live, lab.biotac.fingers), model, run_dir, console)
+                    monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
+                                          display=screen.live_line() if screen else terminal_display(),
+                                          viewer=viewer)
+                outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=screen.bar if screen else None,
+                                    log=console,
+                                    live=monitor, interrupts=interrupts).run(
+                    start_recording=recorder.start if plan.setup else None)
+        except Exception as exc:              # the engine never raises past its safe stop; this is the rest
+            outcome = Outcome(FAILED, f"{type(exc).__name__}: {exc}")
+        finally:
+            if screen:
+                screen.close()
+            outcome, stats = _close(run_dir, prov, recorder, monitor, lab, outcome)
     register_quietly(run_dir, console)            # tactile-runs list finds it (its analysis updates it)
     return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)
 
