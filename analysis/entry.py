@@ -6,7 +6,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from tactile_flow.cliapp.quick_help import help_text, print_and_exit, wants_help
+from tactile_flow.cliapp.quick_help import (bad_input_and_exit, help_text, print_and_exit, searchpath_entries,
+                                            searchpath_problem, wants_help)
 from tactile_flow.cliapp.startup import end_at_once_on_signals
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
@@ -15,6 +16,10 @@ CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 def main() -> None:
     end_at_once_on_signals()
     if wants_help(sys.argv[1:]):
-        print_and_exit(help_text(CONF_DIR, "analyze"))
+        searchpath = searchpath_entries(sys.argv[1:])
+        problem = searchpath_problem(searchpath)
+        if problem:
+            bad_input_and_exit(problem)
+        print_and_exit(help_text(CONF_DIR, "analyze", searchpath))
     from .cli import main as analyze
     analyze()

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tactile_flow.validation import ConfigError, brief, suggest
+
 from . import segments as seg
 
 SWEEP, POUR, GENERIC = "sweep", "pour", "generic"
@@ -44,6 +46,45 @@ class Segment:
 
     def frames(self) -> int:
         return self.stop - self.start
+
+
+#: the labels each scheme can produce
+SCHEME_LABELS = {SWEEP: ("approach", "before", "during", "after", "lift"), POUR: POUR_PHASES,
+                 GENERIC: ("approach", "contact", "no_contact", "all", "lift")}
+
+
+def check_labels(labels, key: str = "protocol.labels") -> None:
+    """Refuse declared ``labels`` that would silently change the analysis, before a run records:
+    a label one edit from a scheme's label (a misspelt ``durign`` selects the generic scheme:
+    no crossings, widths or directions), named with the nearest label; and a scheme's label
+    the labels do not select (``before`` without ``during`` selects the generic scheme, so it
+    would never appear). A label of one's own, like no scheme's, names a generic run
+    (``docs/protocols.md``, section 3). Raises :class:`validation.ConfigError` naming ``key[i]``."""
+    if labels is None:
+        return
+    if not isinstance(labels, (list, tuple)) or not all(isinstance(x, str) for x in labels):
+        raise ConfigError(key, f"got {brief(labels)}; expected a list of segment labels")
+    chosen = scheme(labels)
+    known = sorted({x for names in SCHEME_LABELS.values() for x in names})
+    for i, label in enumerate(labels):                 # a misspelt label first: it may be what changed the scheme
+        near = suggest(label, known) if label not in known else None
+        if near is not None:
+            owner = next(name for name, names in SCHEME_LABELS.items() if near in names)
+            raise ConfigError(f"{key}[{i}]", f"unknown label {label!r}, close to the {owner} scheme's `{near}`; "
+                                             f"expected a scheme's label, or one of your own unlike them (for the "
+                                             f"generic scheme); did you mean `{near}`?")
+    for i, label in enumerate(labels):
+        if label in SCHEME_LABELS[chosen] or label not in known:
+            continue
+        others = [name for name, names in SCHEME_LABELS.items() if label in names]
+        raise ConfigError(f"{key}[{i}]", f"{label!r} is a label of the {' and '.join(others)} scheme, but these labels "
+                                         f"select the {chosen} scheme ({_why(chosen)}), which produces only "
+                                         f"{', '.join(SCHEME_LABELS[chosen])}")
+
+
+def _why(chosen: str) -> str:
+    return {SWEEP: "they include during", POUR: "they include a pour phase",
+            GENERIC: "no during, no pour phase"}[chosen]
 
 
 def scheme(labels) -> str:

@@ -27,7 +27,7 @@ from tactile_flow.cliapp.runner import report
 from tactile_flow.runstore import RunStatus, rundir
 
 from .interrupts import Interrupts
-from .schema import check_targets, register
+from .schema import register
 
 log = logging.getLogger("tactile-run")
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
@@ -71,13 +71,16 @@ def run_job(cfg, console=console, interrupts: Interrupts | None = None) -> int:
 def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
     from . import resume                            # the run store, the simulator, numba: not for --help
     from .run import RunResult, hand_off, run_protocol
+    from .settings import run_settings
+    verbose = cfg.get("verbose") is True
     try:
-        check_targets(cfg)
-        _refuse_parallel_hardware(cfg, hc)
+        settings = run_settings(cfg)                # the one check of the whole config: typed from here on
+        verbose = settings.verbose
+        _refuse_parallel_hardware(settings, hc)
         decision = "run"
-        if cfg.resume and not cfg.plan_only:
+        if settings.resume and not settings.plan_only:
             with interrupts.during("writing"):        # an earlier attempt may be moved aside
-                decision = resume.decide(run_dir, OmegaConf.to_yaml(cfg, resolve=True), analyze=cfg.analyze)
+                decision = resume.decide(run_dir, settings.config_yaml, analyze=settings.analyze)
         if decision == "skip":
             console(f"run {run_dir}: skipped (succeeded before with the same config and code)")
             return 0
@@ -86,30 +89,30 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
                     f"or incomplete: analysing it again")
             result = RunResult("success", run_dir, None, run_dir / "run.zarr")
         else:
-            result = run_protocol(cfg, run_dir, overrides=list(hc.overrides.task), console=console,
+            result = run_protocol(settings, run_dir, overrides=list(hc.overrides.task), console=console,
                                   interrupts=interrupts)
         interrupts.phase = "writing"                  # the run is recorded: a signal now skips the analysis
     except ValueError as exc:                       # ProtocolError, ConfigError, RunDirBusy: bad input
-        _report(cfg, exc, "error")
+        _report(verbose, exc, "error")
         return BAD_INPUT
     except Exception as exc:
-        _report(cfg, exc, "run failed")
+        _report(verbose, exc, "run failed")
         return EXIT_CODES["failed"]
     if result.status == "planned":
         return 0
     detail = f" ({result.error})" if result.error else ""
     code = EXIT_CODES.get(result.status, 1)
-    if cfg.analyze and interrupts.count and result.status != "failed":
+    if settings.analyze and interrupts.count and result.status != "failed":
         console(f"run {run_dir}: {result.status}{detail}; not analysed (stopped by the operator): "
                 f"`tactile-analyze run={result.store}`")
         return EXIT_CODES["aborted"]               # interrupted, as a Ctrl-C a moment later in the analysis
-    if cfg.analyze and result.status in ("success", "aborted"):
+    if settings.analyze and result.status in ("success", "aborted"):
         try:
             with interrupts.during("analysis"):
-                hand_off(result, cfg.analysis, console=console)
+                hand_off(result, settings.analysis, console=console)
         except (Exception, KeyboardInterrupt) as exc:
             if isinstance(exc, Exception) and not interrupts.count:     # the recording is safe: say what went wrong
-                _report(cfg, exc, "analysis failed")
+                _report(verbose, exc, "analysis failed")
                 console(f"run {run_dir}: {result.status}{detail}, recorded; analysis failed ({type(exc).__name__}); "
                         f"analyse it again with `tactile-analyze run={result.store}`")
                 return code or EXIT_CODES["failed"]
@@ -121,17 +124,17 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
     return code
 
 
-def _report(cfg, exc: Exception, what: str) -> None:
-    report(exc, what, bool(cfg.get("verbose")))
+def _report(verbose: bool, exc: Exception, what: str) -> None:
+    report(exc, what, verbose)
     log.error(f"{what}: {exc}", exc_info=exc)
 
 
-def _refuse_parallel_hardware(cfg, hc) -> None:
+def _refuse_parallel_hardware(settings, hc) -> None:
     """One robot: real hardware only with Hydra's sequential launcher."""
     launcher = str(OmegaConf.select(hc, "launcher._target_", default=""))
-    if cfg.hardware.get("backend") != "sim" and launcher and not launcher.endswith("BasicLauncher"):
+    if settings.backend != "sim" and launcher and not launcher.endswith("BasicLauncher"):
         raise ValueError(f"hydra/launcher: {launcher} runs jobs in parallel; hardware="
-                         f"{cfg.hardware.get('backend')} drives one robot, so sweeps on it must use the "
+                         f"{settings.backend} drives one robot, so sweeps on it must use the "
                          f"default sequential launcher")
 
 
@@ -151,10 +154,8 @@ def _app(cfg) -> None:
 
 
 def main() -> None:
-    if sys.argv[1:] in (["--list"], ["list"]):                 # what there is to run, one line each
-        from .listing import listing
-        print(listing(CONF_DIR))
-        sys.exit(0)
+    from .entry import answer_without_hydra
+    answer_without_hydra(sys.argv[1:])
     register()
     logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
     _interrupts.install()                    # the run owns Ctrl-C and SIGTERM (protocols.interrupts)

@@ -27,11 +27,10 @@ import numpy as np
 from tactile_flow.hardware.errors import DeviceError, ProtectiveStopError
 from tactile_flow.runstore.status import RunStatus
 from tactile_flow.tactile.slip import CAUSES
-from tactile_flow.validation import build
-
-from .interlocks import InterlockTripped, Interlocks, SafetyConfig
+from .interlocks import InterlockTripped, Interlocks
 from .interrupts import Interrupts
 from .plan import Geometry, Limits, Plan, PlannedStep
+from .settings import RunSettings, run_settings
 from .steps import Criterion
 
 SUCCESS, ABORTED, FAILED = RunStatus.SUCCESS, RunStatus.ABORTED, RunStatus.FAILED
@@ -55,24 +54,23 @@ class Outcome:
 class RunContext(Geometry):
     """What a step's ``run`` sees: the lab, the recorder, parameters and helpers."""
 
-    def __init__(self, lab, recorder, cfg, progress=None, live=None, interrupts: Interrupts | None = None):
-        super().__init__(cfg.hardware, lab.surface, cfg.protocol.finger)
+    def __init__(self, lab, recorder, settings: RunSettings, progress=None, live=None,
+                 interrupts: Interrupts | None = None):
+        super().__init__(settings.hardware, lab.surface, settings.protocol.finger)
         self.live = live                          # a protocols.live.LiveMonitor, or None
         self.hand_targets: dict[str, float] = {}  # joint angles commanded so far (rad)
         self.hand_until = -np.inf                 # clock time the commanded hand motion ends
-        self.lab, self.recorder, self.params = lab, recorder, cfg.protocol
-        self.limits = Limits.from_hardware(cfg.hardware)
+        self.lab, self.recorder, self.params = lab, recorder, settings.protocol
+        self.limits = Limits.from_hardware(settings.hardware)
         self.clock = lab.clock
         self.poll = 1.0 / lab.biotac.rate_hz
         self.stop_requested = False
         self.interrupts = interrupts or Interrupts()
         self.progress = progress
         self.fingers = list(lab.biotac.fingers)
-        self.finger_index = self.fingers.index(cfg.protocol.finger)
+        self.finger_index = self.fingers.index(settings.protocol.finger)
         self.tare_pdc = np.zeros(len(self.fingers))
-        # a plain dataclass, not the OmegaConf node: the interlocks read it every tick
-        safety = build(SafetyConfig, cfg.get("safety"), "safety")
-        self.interlocks = Interlocks(safety, self.limits, self.fingers, lab.biotac.rate_hz, self.clock)
+        self.interlocks = Interlocks(settings.safety, self.limits, self.fingers, lab.biotac.rate_hz, self.clock)
 
     @property
     def pose(self) -> np.ndarray:
@@ -229,12 +227,14 @@ class _Unrecorded:
 class RunEngine:
     """Runs a :class:`~protocols.plan.Plan` on a connected lab, recording as it goes.
 
-    ``interrupts``: the run's :class:`~protocols.interrupts.Interrupts` (installed by the
-    caller); without one the engine installs its own for the duration of :meth:`run`."""
+    ``cfg``: the run's :class:`~protocols.settings.RunSettings` (a composed config is checked
+    first). ``interrupts``: the run's :class:`~protocols.interrupts.Interrupts` (installed by
+    the caller); without one the engine installs its own for the duration of :meth:`run`."""
 
     def __init__(self, lab, recorder, cfg, plan: Plan, progress_factory=None, log=print, live=None,
                  interrupts: Interrupts | None = None):
-        self.lab, self.recorder, self.cfg, self.plan = lab, recorder, cfg, plan
+        cfg = run_settings(cfg)
+        self.lab, self.recorder, self.settings, self.plan = lab, recorder, cfg, plan
         self.progress_factory = progress_factory
         self.log = log
         self._own_interrupts = interrupts is None
@@ -267,7 +267,7 @@ class RunEngine:
                     self._run_step(planned)
                     self.done += 1
                 self._start_recording(recorder, start_recording)
-            if self.cfg.protocol.get("tare", True):
+            if self.settings.protocol.tare:
                 self.ctx.tare()
             if self.ctx.live is not None:
                 self.ctx.live.begin()

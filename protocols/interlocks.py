@@ -26,21 +26,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tactile_flow.validation import spec
+
 
 @dataclass
 class SafetyConfig:
-    """Interlock limits. ``None`` takes the hardware's own limit (``hardware.arm.*``)."""
+    """Interlock limits. ``None`` takes the hardware's own limit (``hardware.arm.*``). Every
+    limit is a finite number within its bounds (:func:`validation.spec`): a NaN limit would
+    never trip, a negative one would trip at once."""
 
-    pdc_max: float = 3900.0            # counts
-    electrode_min: float = 100.0       # counts
-    force_max: float | None = None     # N
-    speed_max: float | None = None     # m/s
-    contact_time_max: float = 180.0    # s
-    contact_threshold: float = 30.0    # counts of PDC above the tare
-    stale_periods: int = 30            # BioTac frame periods (host stalls of ~0.2 s seen under load)
-    recording_stall_s: float = 2.0     # s of wall time without a successful commit
-    max_duration_s: float = 7200.0     # s, the longest a protocol may be planned to run (checked by the plan)
-    on_protective_stop: str = "abort"  # "abort": fail the run; "recover": unlock, redo the step once
+    pdc_max: float = spec(3900.0, gt=0, units="counts")
+    electrode_min: float = spec(100.0, ge=0, lt=4095, units="counts")
+    force_max: float | None = spec(None, gt=0, units="N")
+    speed_max: float | None = spec(None, gt=0, units="m/s")
+    contact_time_max: float = spec(180.0, gt=0, units="s")
+    contact_threshold: float = spec(30.0, gt=0, units="counts of PDC above the tare")
+    stale_periods: int = spec(30, ge=1, units="BioTac frame periods")   # host stalls of ~0.2 s seen under load
+    recording_stall_s: float = spec(2.0, gt=0, units="s of wall time without a successful commit")
+    max_duration_s: float = spec(7200.0, gt=0, units="s")   # the longest a protocol may be planned to run (the plan)
+    on_protective_stop: str = spec("abort", choices=("abort", "recover"))   # "abort": fail the run; "recover": unlock, redo the step once
 
 
 class InterlockTripped(Exception):
@@ -56,8 +60,6 @@ class Interlocks:
     checks (contact start times, the newest frame seen)."""
 
     def __init__(self, cfg: SafetyConfig, limits, fingers: list[str], rate_hz: float, clock):
-        if cfg.on_protective_stop not in ("abort", "recover"):
-            raise ValueError(f"safety.on_protective_stop: expected 'abort' or 'recover', got {cfg.on_protective_stop!r}")
         self.cfg, self.limits, self.fingers, self.clock = cfg, limits, fingers, clock
         self.force_max = limits.max_force if cfg.force_max is None else cfg.force_max
         self.speed_max = limits.max_speed if cfg.speed_max is None else cfg.speed_max

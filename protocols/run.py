@@ -13,12 +13,9 @@ from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from pathlib import Path
 
-from omegaconf import OmegaConf
 from tqdm import tqdm
 
 from tactile_flow.cliapp.heap import long_lived_frozen
-from tactile_flow.hardware.errors import ConfigError
-from tactile_flow.tactile.frames import DEFAULT_VIEWS
 from tactile_flow.tactile.geometry import load_taxels
 from tactile_flow.runstore import RunStore, provenance, rundir, utc_now
 from tactile_flow.tactile import warmup
@@ -27,11 +24,10 @@ from tactile_flow.tactile.pipeline import TactileModel
 from .calibration import session_baseline, store_baseline
 from .engine import FAILED, Outcome, RunEngine
 from .interrupts import Interrupts
-from .backends import check_hardware, make_lab
-from .live import (LiveConfig, LiveMonitor, live_fingers, live_settings, open_viewer, tactile_config, terminal_display,
-                   viewer_names, warm_up)
+from .backends import make_lab
+from .live import LiveConfig, LiveMonitor, live_fingers, open_viewer, tactile_config, terminal_display, warm_up
 from .plan import Plan, format_timeline, make_plan
-from .schema import check_config
+from .settings import run_settings
 from .recorder import Recorder
 from .steps import ProtocolError
 
@@ -52,20 +48,21 @@ class RunResult:
 
 
 def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrupts | None = None) -> RunResult:
-    """Check the plan, then (unless ``cfg.plan_only``) run it on ``cfg.hardware``.
+    """Check the plan, then (unless ``plan_only``) run it on the hardware.
 
-    Bad config or protocol raises ``ValueError`` (``ProtocolError``/``ConfigError``, naming
-    the key) before any hardware is touched. A run that starts always ends with a closed
+    ``cfg``: the run's :class:`~protocols.settings.RunSettings`, or the composed config (checked
+    first by :func:`~protocols.settings.run_settings`). Bad config or protocol raises
+    ``ValueError`` (``ProtocolError``/``ConfigError``, naming the key) before any hardware is
+    touched. A run that starts always ends with a closed
     store and ``run.json``, whatever its status (if the disk allows: the result's error then
     names ``tactile-recover``). The run directory is locked for the run (:mod:`.rundir`);
     ``interrupts`` owns Ctrl-C and SIGTERM (installed here when not given).
     """
     run_dir = Path(run_dir)
-    check_config(cfg)
+    cfg = run_settings(cfg)
     plan = make_plan(cfg)
     live, model = live_setup(cfg, plan, build=not cfg.plan_only, console=console)
     if cfg.plan_only:
-        check_hardware(cfg)
         console(format_timeline(plan))
         return RunResult("planned", run_dir, plan)
 
@@ -75,13 +72,13 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
     interrupts = interrupts or Interrupts(console)
     store_path = run_dir / "run.zarr"
     with (interrupts.installed() if own else nullcontext()), rundir.locked(run_dir), lab:
-        prov = provenance.collect(OmegaConf.to_yaml(cfg, resolve=True), list(overrides), lab.identities(),
-                                  _calibration(lab), cfg.hardware.get("seed"), protocol=plan.protocol)
+        prov = provenance.collect(cfg.config_yaml, list(overrides), lab.identities(),
+                                  _calibration(lab), getattr(cfg.hardware, "seed", None), protocol=plan.protocol)
         with interrupts.during("writing"):          # from the store's creation to run.json: no signal raises
             store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
                                     run_id=prov["run_id"], provenance=provenance.summary(prov),
                                     attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
-                                           "tare": bool(cfg.protocol.get("tare", True))},
+                                           "tare": cfg.protocol.tare},
                                     live=(live_fingers(live, lab.biotac.fingers), model.config.views)
                                     if model else None, streams=lab.streams())
             stored = store_baseline(store, baseline, lab.biotac.fingers)
@@ -153,36 +150,20 @@ def live_setup(cfg, plan: Plan, build: bool = True, console=print) -> tuple[Live
     or auto when a step reacts to slip) and ``build``, the online tactile model (else
     ``None``), its kernels compiled (on every core, the first time on a machine). A protocol
     that reacts to slip with the live monitor turned off is refused here, before anything
-    moves."""
-    try:
-        live = live_settings(cfg)
-    except (ValueError, TypeError) as exc:
-        raise ConfigError("live", str(exc)) from None
+    moves. ``cfg``: :class:`~protocols.settings.RunSettings` (or the composed config)."""
+    cfg = run_settings(cfg)
+    live = cfg.live
     reacting = plan.slip_steps()
-    if not cfg.protocol.get("tare", True) and (live.enabled or reacting):
+    if not cfg.protocol.tare and (live.enabled or reacting):
         what = f"{reacting[0]} reacts to slip" if reacting else "live.enabled=true"
         raise ProtocolError("protocol.tare", f"false starts the run in contact without a tare, but {what}: the "
                                              f"live monitor needs a tare at rest")
     if live.enabled is False and reacting:
         raise ProtocolError(reacting[0], "reacts to slip, but live.enabled=false turns the slip detector off; "
                                          "drop live.enabled=false or the step's until: slip / on_slip")
-    if live.viewer is not None and live.viewer not in viewer_names():
-        raise ConfigError("live.viewer", f"{live.viewer!r}: expected one of {viewer_names()} (or null)")
-    if live.enabled is False and live.viewer:
-        raise ConfigError("live.viewer", "shows the live monitor, which live.enabled=false turns off")
     if not (live.enabled or reacting or live.viewer):
         return live, None
-    unknown = [f for f in live.fingers or () if f not in cfg.hardware.fingers]
-    if unknown:
-        raise ConfigError("live.fingers", f"{unknown} have no sensor in hardware.fingers {list(cfg.hardware.fingers)}")
-    try:
-        tactile = tactile_config(cfg.get("analysis") or {}, live.views)
-    except ValueError as exc:
-        raise ConfigError("live", str(exc)) from None
-    known = {**DEFAULT_VIEWS, **tactile.custom_views}
-    bad = [v for v in live.views if v not in known] or ([] if live.views else ["(none)"])
-    if bad:
-        raise ConfigError("live.views", f"{bad}: expected one or more of {sorted(known)}")
+    tactile = tactile_config(getattr(cfg.analysis, "tactile", None), live.views)
     if not build:
         return live, None
     warmup.compile_cold(tactile, console=console, groups=warmup.LIVE)
@@ -192,7 +173,8 @@ def live_setup(cfg, plan: Plan, build: bool = True, console=print) -> tuple[Live
 
 
 def hand_off(result: RunResult, analysis_cfg, console=print) -> dict | None:
-    """Give the run store to the analysis pipeline registered as an entry point."""
+    """Give the run store to the analysis pipeline registered as an entry point, with the
+    analysis's config (typed, as :class:`~protocols.settings.RunSettings` holds it, or a node)."""
     found = entry_points(group=ANALYSIS_ENTRY_POINTS)
     if not found:
         console("analysis: no analysis pipeline installed; skipped")
@@ -209,8 +191,7 @@ def _conditions(cfg, lab, baseline: dict, plan: Plan) -> dict:
     press = next((p.step for p in plan.steps if p.step.kind == "press"), None)
     force = float("nan") if press is None else float(press.force if press.force is not None else
                                                        cfg.protocol.press_force)
-    return {"object": obj, "press_force_n": force,
-            "tare": bool(cfg.protocol.get("tare", True)), "baseline": baseline["method"]}
+    return {"object": obj, "press_force_n": force, "tare": cfg.protocol.tare, "baseline": baseline["method"]}
 
 
 def _calibration(lab) -> dict:
