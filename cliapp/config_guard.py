@@ -95,7 +95,19 @@ def origin(key: str, _hops: int = 0) -> tuple[str, int] | None:
 
 
 def _set_on_command_line(key: str) -> bool:
-    return any(key == k or key.startswith((k + ".", k + "[")) for k in COMMAND_LINE)
+    return any(key == k or key.startswith((k + ".", k + "[")) for k in COMMAND_LINE | _job_override_keys())
+
+
+def _job_override_keys() -> set[str]:
+    """The keys the running Hydra job's overrides set (a sweep's job in a worker process, where
+    :func:`install` did not see the command line)."""
+    from hydra.core.hydra_config import HydraConfig
+    if not HydraConfig.initialized():
+        return set()
+    try:
+        return override_keys(list(HydraConfig.get().overrides.task))
+    except Exception:                               # noqa: BLE001 - a partial config: no keys
+        return set()
 
 
 def override_keys(args) -> set[str]:

@@ -129,11 +129,14 @@ def _unraisable(before):
     return hook
 
 
-def report(exc: BaseException, what: str, verbose: bool = False) -> None:
-    """An error on stderr as one line, ``what: message`` (the traceback before it with ``verbose``)."""
+def report(exc: BaseException, what: str, verbose: bool = False) -> str:
+    """An error on stderr as one line, ``what: message`` (the traceback before it with
+    ``verbose``); returns the line."""
     if verbose:
         traceback.print_exception(exc)
-    print(f"{what}: {error_line(exc)}", file=sys.stderr)
+    line = f"{what}: {error_line(exc)}"
+    print(line, file=sys.stderr)
+    return line
 
 
 #: omegaconf's names of the types a value could not be converted to, as our messages say them

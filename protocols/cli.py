@@ -121,11 +121,13 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
                     f"analyse it with `tactile-analyze run={result.store}`")
             return EXIT_CODES["aborted"]
     console(f"run {run_dir}: {result.status}{detail}")
+    if code:
+        jobresults.note_error(f"run {run_dir}: {result.status}{detail}")
     return code
 
 
 def _report(verbose: bool, exc: Exception, what: str) -> None:
-    report(exc, what, verbose)
+    jobresults.note_error(report(exc, what, verbose))      # a sweep names its job with this line
     log.error(f"{what}: {exc}", exc_info=exc)
 
 
@@ -208,12 +210,17 @@ class SweepSummary(jobresults.SweepResults):
     def summarise(self, config, results: list[dict]) -> None:
         root = Path(config.hydra.sweep.dir)
         rows = sweep_rows(root)
+        recorded = {r["job"] for r in rows}          # a job that recorded nothing is a row too, saying why
+        rows += [{"job": Path(r["dir"]).name, "overrides": " ".join(r.get("overrides") or []),
+                  "status": jobresults.outcome(r), "error": r.get("error") or ""}
+                 for r in results if r["code"] != 0 and Path(r["dir"]).name not in recorded]
+        rows.sort(key=lambda r: _job_number(r["job"]))
         if rows:
             write_summary(root, rows)
-            unanalysed = sum(r["status"] == "success" and r["analysis"] != "complete" for r in rows) \
+            unanalysed = sum(r["status"] == "success" and r.get("analysis") != "complete" for r in rows) \
                 if config.get("analyze") else 0
-            print(f"sweep {root}: {len(rows)} runs, {sum(r['status'] == 'success' for r in rows)} succeeded"
-                  + (f", {unanalysed} of them not (completely) analysed" if unanalysed else "")
+            print(f"sweep {root}: {jobresults.counts(results)}"
+                  + (f"; {unanalysed} successful run(s) not (completely) analysed" if unanalysed else "")
                   + "; summary.md, summary.csv")
 
 
