@@ -20,7 +20,7 @@ All indices are frame indices into the run's BioTac time axis; segments are ``[s
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -139,10 +139,14 @@ def generic_segments(finger: str, T: int, contacts, declared=()) -> list[Segment
 
 @dataclass
 class PourPhases:
-    """Onsets (frame indices, None if not found) and why a phase was not found."""
+    """Onsets (frame indices, None if not found); ``reasons``: why a phase that should be in the
+    record was not found (a skipped estimate); ``not_reached``: phases the run never got to (the
+    grasp held: a reactive pour tightened in time, or the record ends before the bottle fell),
+    which is a result, not something the analysis missed."""
 
     onsets: dict
     reasons: dict
+    not_reached: dict = field(default_factory=dict)
 
 
 def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | None, rotation_rad: float,
@@ -237,9 +241,10 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
         reasons["downward"] = "no sudden pressure fall (the grasp breaking away) nor pressure maximum before the full slip"
     onsets["downward"] = down
     onsets["full_slip"] = full if b < len(p) else None
+    not_reached = {}
     if onsets["full_slip"] is None:
-        reasons["full_slip"] = "the grasp holds until the record ends"
-    return PourPhases(onsets, reasons)
+        not_reached["full_slip"] = "the grasp holds until the record ends"
+    return PourPhases(onsets, reasons, not_reached)
 
 
 REACTED_FRAMES = 3     # frames after the reaction still searched for the initial slip's fall
@@ -253,12 +258,13 @@ def _reactive_phases(q, onsets, start, reaction, b, trough_prominence, distance,
     if slip is None:
         reasons["initial_slip"] = "no pressure trough between the pour start and the protocol's reaction"
     onsets["initial_slip"] = slip
-    why = f"not reached: the protocol reacted to the slip at {t[reaction]:.2f} s and the grasp held"
+    why = f"the protocol reacted to the slip at {t[reaction]:.2f} s and the grasp held"
+    not_reached = {}
     for name in ("rotation", "downward", "full_slip"):
         onsets[name] = None
-        reasons[name] = why
+        not_reached[name] = why
     onsets["held"] = reaction
-    return PourPhases(onsets, reasons)
+    return PourPhases(onsets, reasons, not_reached)
 
 
 def pour_segments(finger: str, T: int, phases: PourPhases, contact, contact_index: int, margin: int):

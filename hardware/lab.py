@@ -42,7 +42,9 @@ from .lab_container import Lab
 from .surfaces import load_surface
 
 TOP_KEYS = ("backend", "fingers", "workspace", "arm", "fingertips", "rosbridge", "hand", "biotac", "pump", "scale",
-            "biotac_calibration")
+            "biotac_calibration", "emulator")
+#: in an emulated lab's folder (``emulator``): what ``tactile-emulate`` emulates (its board), as JSON
+EMULATOR_FILE = "emulator.json"
 BIOTAC_SOURCES = ("rosbridge", "serial")
 #: arm keys the planner and the engine read; the rest go to the UR10 driver's config
 ARM_PLAN_KEYS = ("home_pose", "max_speed_m_s", "max_accel_m_s2", "stop_accel_m_s2", "max_contact_force_n")
@@ -77,6 +79,7 @@ class LabConfig:
     pump: SerialPumpConfig
     scale: SerialScaleConfig
     biotac_calibration: str | None = None
+    emulator: str | None = None         # the folder of a tactile-emulate lab (hardware=lab_emulated), else None
     stage: None = None                  # the real lab has no object stage
 
 
@@ -99,6 +102,9 @@ def load_lab_config(hw_cfg, key: str = "hardware") -> LabConfig:
     calibration = hw.get("biotac_calibration")
     if calibration is not None and not isinstance(calibration, str):
         raise ConfigError(f"{key}.biotac_calibration", f"expected a file name or null, got {calibration!r}")
+    emulator = hw.get("emulator")
+    if emulator is not None and not isinstance(emulator, str):
+        raise ConfigError(f"{key}.emulator", f"got {emulator!r}; expected the emulated lab's folder or null")
     rosbridge = _make(RosbridgeConfig, hw.get("rosbridge"), f"{key}.rosbridge")
     return LabConfig(backend="lab", fingers=fingers, workspace=workspace,
                      arm=_arm_config(hw.get("arm"), workspace, f"{key}.arm"),
@@ -107,7 +113,21 @@ def load_lab_config(hw_cfg, key: str = "hardware") -> LabConfig:
                      biotac=biotac_config(hw.get("biotac"), fingers, rosbridge, f"{key}.biotac"),
                      pump=_make(SerialPumpConfig, hw.get("pump"), f"{key}.pump"),
                      scale=_make(SerialScaleConfig, hw.get("scale"), f"{key}.scale"),
-                     biotac_calibration=calibration)
+                     biotac_calibration=calibration, emulator=emulator)
+
+
+def emulated_board(cfg: LabConfig) -> dict | None:
+    """What an emulated lab (``cfg.emulator``) says about its board: ``{"surface_name": NAME,
+    "surface": {...}}`` (``surface`` None: the BioTacs rest), or None (not emulated, or no
+    ``tactile-emulate`` running there)."""
+    import json
+    from pathlib import Path
+    if cfg.emulator is None:
+        return None
+    try:
+        return json.loads((Path(cfg.emulator) / EMULATOR_FILE).read_text())
+    except (OSError, ValueError):
+        return None
 
 
 def make_real_lab(hw_cfg, surface_cfg=None, *, key: str = "hardware") -> Lab:

@@ -45,3 +45,27 @@ def make_lab(settings):
     ``settings.surface``."""
     hardware = settings.hardware
     return _function(BACKENDS[backend_of(hardware)][1])(hardware, settings.surface)
+
+
+def board_warning(settings) -> str | None:
+    """On an emulated lab (``hardware.emulator``, ``hardware=lab_emulated``), a warning when the
+    board the emulated BioTacs press on is not this run's: the readings would not match the arm's
+    moves (a sweep on sticks over an emulated board of straws finds the wrong features, or none)."""
+    from dataclasses import asdict
+
+    from tactile_flow.hardware.lab import LabConfig, emulated_board
+    if not isinstance(settings.hardware, LabConfig):
+        return None
+    said = emulated_board(settings.hardware)
+    if said is None:
+        return None
+    ours = asdict(settings.surface) if settings.surface is not None else None
+    if said.get("surface") == ours:
+        return None
+    emulated = said.get("surface_name")
+    wanted = (ours or {}).get("name") or (ours or {}).get("kind") or "none"
+    return (f"warning: the emulated lab ({settings.hardware.emulator}) presses the BioTacs on the board "
+            f"{emulated!r}, but this run's board is {wanted!r}"
+            + (" (the same name, other values)" if emulated == wanted else "")
+            + f": the readings will not follow this protocol's moves; restart it with "
+              f"`tactile-emulate --surface {wanted}`")

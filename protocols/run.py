@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from pathlib import Path
 
-from tqdm import tqdm
 
 from tactile_flow.cliapp.heap import long_lived_frozen
+from tactile_flow.cliapp.progress import progress_bar
 from tactile_flow.tactile.geometry import load_taxels
 from tactile_flow.runstore import RunStore, provenance, rundir, utc_now
 from tactile_flow.tactile import warmup
@@ -24,7 +24,7 @@ from tactile_flow.tactile.pipeline import TactileModel
 from .calibration import session_baseline, store_baseline
 from .engine import FAILED, Outcome, RunEngine
 from .interrupts import Interrupts
-from .backends import make_lab
+from .backends import board_warning, make_lab
 from .live import LiveConfig, LiveMonitor, live_fingers, open_viewer, tactile_config, terminal_display, warm_up
 from .plan import Plan, format_timeline, make_plan
 from .settings import run_settings
@@ -66,6 +66,9 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
         console(format_timeline(plan))
         return RunResult("planned", run_dir, plan)
 
+    mismatch = board_warning(cfg)                   # an emulated lab on another board: said before anything moves
+    if mismatch:
+        console(mismatch)
     lab = make_lab(cfg)
     baseline = session_baseline(cfg.hardware, lab)
     own = interrupts is None
@@ -203,15 +206,15 @@ def _calibration(lab) -> dict:
 class ProgressConsole:
     """The console of a run with ``progress=true``: a progress bar per step, over its expected
     duration (clock seconds), and under it the live monitor's operator line (finger, flow
-    arrow, slip state) as a status line, both redrawn in place by tqdm. The live line needs a
-    terminal (it rewrites itself); the bars go to ``stream`` as tqdm's always do."""
+    arrow, slip state) as a status line, both redrawn in place by tqdm, on a terminal only (in a
+    file their carriage-return redraws are clutter: :func:`cliapp.progress.progress_bar`)."""
 
     def __init__(self, stream=None):
         self.stream = stream if stream is not None else sys.stderr
         self.status = None
 
     def bar(self, planned):
-        return tqdm(total=round(max(planned.duration, 0.01), 2), unit="s", leave=False, dynamic_ncols=True,
+        return progress_bar(total=round(max(planned.duration, 0.01), 2), unit="s", leave=False, dynamic_ncols=True,
                     position=0, file=self.stream, desc=f"step {planned.index:02d} {planned.step.kind:<8}",
                     bar_format="{desc} {percentage:3.0f}%|{bar:24}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}]")
 
@@ -221,7 +224,7 @@ class ProgressConsole:
 
     def _show(self, line: str) -> None:
         if self.status is None:
-            self.status = tqdm(total=0, position=1, leave=False, dynamic_ncols=True, file=self.stream,
+            self.status = progress_bar(total=0, position=1, leave=False, dynamic_ncols=True, file=self.stream,
                                bar_format="{desc}")
         self.status.set_description_str(line)
 
