@@ -14,8 +14,13 @@ Limits (``safety`` in the run config, :class:`SafetyConfig`):
 - contact held longer than ``contact_time_max`` s (PDC more than ``contact_threshold``
   counts above its tare on any finger);
 - a stale stream: no new BioTac frame for ``stale_periods`` frame periods — no motion
-  continues blind. (A device that stops answering raises from the driver instead, which
-  fails the run.)
+  continues blind; named ``malformed_biotac`` when frames kept arriving but the driver
+  refused them (:mod:`hardware.wire`), with how many and the last reason;
+- a lost link, of any device: each device's own verdict (:meth:`hardware.device.Device.check_link`:
+  a closed socket or port, a killed bridge, a stream silent beyond its stale timeout) is asked
+  every period, first, so the safe stop begins one period after the driver knows (the
+  benchmark ``benchmarks/bench_link_loss.py`` measures it on the emulated lab); the run then
+  fails with the device's error.
 - recording failed: the run store could not be committed for ``recording_stall_s`` of wall
   time (full disk...) — no motion continues unrecorded.
 """
@@ -26,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tactile_flow.hardware.errors import DeviceError
 from tactile_flow.validation import spec
 
 
@@ -45,6 +51,14 @@ class SafetyConfig:
     recording_stall_s: float = spec(2.0, gt=0, units="s of wall time without a successful commit")
     max_duration_s: float = spec(7200.0, gt=0, units="s")   # the longest a protocol may be planned to run (the plan)
     on_protective_stop: str = spec("abort", choices=("abort", "recover"))   # "abort": fail the run; "recover": unlock, redo the step once
+
+
+class LinkLost(Exception):
+    """A device's link is down (the driver's typed error is ``__cause__``); ``device`` names it."""
+
+    def __init__(self, device: str, error: Exception):
+        self.device = device
+        super().__init__(str(error))
 
 
 class InterlockTripped(Exception):
@@ -68,23 +82,38 @@ class Interlocks:
         self._contact_since = np.full(len(fingers), np.nan)
         self._last_seq = None
         self._last_new_frame = clock.now()
+        self._refused_before = 0                 # frames the BioTac driver had refused at the last new frame
 
     def check(self, lab, recorder) -> None:
-        """Raise :class:`InterlockTripped` if any limit is breached now."""
+        """Raise :class:`LinkLost` if a device's link is down, :class:`InterlockTripped` if any
+        limit is breached now."""
+        for name, device in lab.devices.items():
+            try:
+                device.check_link()
+            except DeviceError as exc:
+                raise LinkLost(name, exc) from exc
         now = self.clock.now()
-        self._check_biotac(lab.biotac.latest(), now)
+        self._check_biotac(lab.biotac, now)
         self._check_arm(lab.arm)
         failure = recorder.write_failure(self.cfg.recording_stall_s)
         if failure:
             raise InterlockTripped("recording_failed", {"error": failure})
 
-    def _check_biotac(self, frame, now: float) -> None:
+    def _check_biotac(self, biotac, now: float) -> None:
+        frame = biotac.latest()
         if frame is None or frame.seq == self._last_seq:
             if now - self._last_new_frame > self.stale_s:
+                refused = biotac.malformed - self._refused_before
+                if refused:                          # frames arrive, but none the driver could accept
+                    report = biotac.wire_report() or {}
+                    raise InterlockTripped("malformed_biotac", {"refused_frames": refused,
+                                                                "no_valid_frame_for_s": round(now - self._last_new_frame, 3),
+                                                                "limit_s": self.stale_s, "last": report.get("last")})
                 raise InterlockTripped("stale_biotac", {"no_frame_for_s": round(now - self._last_new_frame, 3),
                                                         "limit_s": self.stale_s})
             return
         self._last_seq, self._last_new_frame = frame.seq, now
+        self._refused_before = biotac.malformed
         if not frame.is_valid():
             return                                   # corrupt frames are counted by the recorder
         cfg = self.cfg

@@ -109,6 +109,8 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
                 if screen:
                     screen.close()
                 outcome, stats = _close(run_dir, prov, recorder, monitor, lab, outcome)
+                for line in wire_warnings(wire_reports(lab)):
+                    console(line)
     return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)
 
 
@@ -116,7 +118,7 @@ def _close(run_dir: Path, prov: dict, recorder: Recorder, monitor, lab, outcome:
     """Close the store and write ``run.json``. A store that could not record everything is
     ``failed`` (never the engine's ``success``); what could not be written is said in the
     error, with what to do. Returns the final outcome and the recorder's stream stats."""
-    attrs = {"error": outcome.error}
+    attrs = {"error": outcome.error, "wire": wire_reports(lab)}
     if monitor is not None:
         try:
             attrs["live"] = monitor.close()
@@ -135,7 +137,8 @@ def _close(run_dir: Path, prov: dict, recorder: Recorder, monitor, lab, outcome:
     json_written = False
     try:
         provenance.write_run_json(run_dir / "run.json", prov, status=status, end_time=utc_now(),
-                                  extra={"error": "; ".join(problems) or error, "store": store.path.name})
+                                  extra={"error": "; ".join(problems) or error, "store": store.path.name,
+                                         "wire": attrs["wire"]})
         json_written = True
     except OSError as exc:
         problems.append(f"run.json could not be written ({type(exc).__name__}: {exc})")
@@ -146,6 +149,31 @@ def _close(run_dir: Path, prov: dict, recorder: Recorder, monitor, lab, outcome:
                                                            f"{store.path}` (it closes the store, writes run.json)"]
         error = "; ".join([*problems, ended, *advice])
     return Outcome(status, error, outcome.steps_done), stats
+
+
+def wire_reports(lab) -> dict:
+    """Device → what its driver refused on the wire (:meth:`hardware.device.Device.wire_report`),
+    for the devices that report; stored in the store's root attribute ``wire`` and in ``run.json``."""
+    out = {}
+    for name, device in lab.devices.items():
+        try:
+            report = device.wire_report()
+        except Exception as exc:                  # noqa: BLE001 - a report must never stop the close
+            report = {"error": f"{type(exc).__name__}: {exc}"}
+        if report is not None:
+            out[name] = report
+    return out
+
+
+def wire_warnings(reports: dict) -> list[str]:
+    """One line per device that refused messages: how many, why, and the last one."""
+    lines = []
+    for name, r in reports.items():
+        if r.get("refused"):
+            reasons = ", ".join(f"{n} {why}" for why, n in (r.get("reasons") or {}).items())
+            lines.append(f"warning: {name}: {r['refused']} message(s) refused on the wire ({reasons})"
+                         + (f"; the last: {r['last']}" if r.get("last") else ""))
+    return lines
 
 
 def live_setup(cfg, plan: Plan, build: bool = True, console=print) -> tuple[LiveConfig, TactileModel | None]:
