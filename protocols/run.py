@@ -18,6 +18,7 @@ from tactile_flow.cliapp.heap import long_lived_frozen
 from tactile_flow.cliapp.progress import progress_bar
 from tactile_flow.tactile.geometry import load_taxels
 from tactile_flow.runstore import RunStore, provenance, rundir, utc_now
+from tactile_flow.runstore.room import RESERVE_BYTES
 from tactile_flow.tactile import warmup
 from tactile_flow.tactile.pipeline import TactileModel
 
@@ -83,7 +84,7 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
                                     attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
                                            "tare": cfg.protocol.tare},
                                     live=(live_fingers(live, lab.biotac.fingers), model.config.views)
-                                    if model else None, streams=lab.streams())
+                                    if model else None, streams=lab.streams(), room_bytes=RESERVE_BYTES)
             stored = store_baseline(store, baseline, lab.biotac.fingers)
             if getattr(lab, "truth", None) is not None:
                 lab.truth.conditions = _conditions(cfg, lab, stored, plan)
