@@ -4,17 +4,18 @@ are imported (:mod:`cliapp.quick_help`); everything else goes to :func:`analysis
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
-from tactile_flow.cliapp.quick_help import (bad_input_and_exit, help_text, print_and_exit, searchpath_entries,
-                                            searchpath_problem, wants_help)
+from tactile_flow.cliapp.packaged import require
+from tactile_flow.cliapp.quick_help import (answer_version, bad_input_and_exit, help_text, print_and_exit,
+                                            searchpath_entries, searchpath_problem, wants_help)
 from tactile_flow.cliapp.startup import end_at_once_on_signals
-
-CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+from tactile_flow.conf import DIR as CONF_DIR
 
 
 def main() -> None:
     end_at_once_on_signals()
+    answer_version(sys.argv[1:], "tactile-analyze")
+    require("analyze")
     if wants_help(sys.argv[1:]):
         searchpath = searchpath_entries(sys.argv[1:])
         problem = searchpath_problem(searchpath)

@@ -40,6 +40,7 @@ from hydra.core.plugins import Plugins
 from hydra.plugins.config_source import ConfigResult
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
+from .packaged import repair_hint
 from .quick_help import searchpath_entries, searchpath_problem
 
 MAX_BYTES = 1 << 20          # a config file is a few kB
@@ -332,11 +333,15 @@ class FileConfigSource(_File):
     def load_config(self, config_path: str) -> ConfigResult:
         full = os.path.realpath(os.path.join(self.path, self._normalize_file_name(config_path)))
         node = None
-        if os.path.isfile(full):
-            with open(full, encoding="utf-8", errors="replace") as f:
-                node = check_text(f.read(MAX_BYTES + 1), full)
-        result = super().load_config(config_path)
-        _checked(result, config_path, full, node)
+        try:
+            if os.path.isfile(full):
+                with open(full, encoding="utf-8", errors="replace") as f:
+                    node = check_text(f.read(MAX_BYTES + 1), full)
+            result = super().load_config(config_path)
+            _checked(result, config_path, full, node)
+        except ConfigFileError as exc:
+            hint = repair_hint(full)             # one of the files we ship: a broken install
+            raise ConfigFileError(f"{exc}; {hint}" if hint else str(exc)) from None
         return result
 
 

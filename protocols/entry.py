@@ -5,18 +5,20 @@
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
-from tactile_flow.cliapp.quick_help import (bad_input_and_exit, help_text, print_and_exit, searchpath_entries,
-                                            searchpath_problem, wants_help)
+from tactile_flow.cliapp.packaged import require
+from tactile_flow.cliapp.quick_help import (answer_version, bad_input_and_exit, help_text, print_and_exit,
+                                            searchpath_entries, searchpath_problem, wants_help)
 from tactile_flow.cliapp.startup import end_at_once_on_signals
-
-CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+from tactile_flow.conf import DIR as CONF_DIR
 
 
 def main() -> None:
     end_at_once_on_signals()
-    answer_without_hydra(sys.argv[1:])
+    argv = sys.argv[1:]
+    answer_version(argv, "tactile-run")
+    require("config")
+    answer_without_hydra(argv)
     from .cli import main as run
     run()
 
