@@ -134,7 +134,8 @@ def report(exc: BaseException, what: str, verbose: bool = False) -> str:
     ``verbose``); returns the line."""
     if verbose:
         traceback.print_exception(exc)
-    line = f"{what}: {error_line(exc)}"
+    located = as_config_error(exc) is not None          # a config key: with the file and line it came from
+    line = f"{what}: {error_line(exc) if located else exc}"
     print(line, file=sys.stderr)
     return line
 
@@ -164,8 +165,9 @@ def error_line(exc: BaseException, step_fields=None) -> str:
                 + (f"; expected one of {', '.join(options)}" if options else "")
                 + (f"; did you mean `{near}`?" if near else ""))
     parts = [str(exc)]
-    if exc.__cause__ is not None and str(exc.__cause__) not in parts[0]:
-        parts.append(str(exc.__cause__))
+    cause = exc.__cause__
+    if cause is not None and str(cause) not in parts[0] and type(cause).__name__ != "_RemoteTraceback":
+        parts.append(str(cause))                     # (a worker process's traceback is not a message)
     return "; ".join(line.strip() for part in parts for line in part.splitlines() if line.strip())
 
 
