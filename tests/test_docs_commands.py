@@ -129,7 +129,8 @@ TESTED: dict[str, object] = {
     'python benchmarks/bench_sim.py': BENCH,
     'python benchmarks/bench_slip.py': BENCH,
     'python benchmarks/bench_slip_direction.py': BENCH,
-    'python benchmarks/bench_slip_direction.py --noise 0.5 1 2': BENCH,
+    'python benchmarks/bench_slip_direction.py --grid classic': BENCH,
+    'python benchmarks/bench_slip_direction.py --grid varied': BENCH,
     'python benchmarks/bench_speed.py': BENCH,
     'python benchmarks/bench_speed.py --only analysis': BENCH,
     'python benchmarks/bench_speed.py --only analysis --repeat 3': BENCH,
@@ -250,13 +251,15 @@ TESTED: dict[str, object] = {
     'tactile-run progress=false': "tests/test_cli.py::test_default_run_leaves_a_complete_store",
     'tactile-run protocol.sweep_speed=20 hardware.seed=3': HERE,
     'tactile-run protocol=P analyze=false': "tests/test_cli.py::test_default_run_leaves_a_complete_store",
+    'tactile-run protocol=P protocol.sweep_speed=V analysis.figures=false':
+        Variant("tactile-run protocol=sticks_sweep protocol.sweep_speed=20 analysis.figures=false progress=false",
+                "P and V filled with one of the runs docs/analysis.md tables"),
     'tactile-run protocol=pour_grasp': NUMBERS,
     'tactile-run protocol=pour_grasp plan_only=true': HERE,
     'tactile-run protocol=pour_grasp_reactive':
         "tests/test_first_hour.py::test_a_reactive_pour_does_not_count_phases_it_never_reached_as_skipped",
     'tactile-run protocol=pour_grasp_reactive live.viewer=rerun':
         "tests/test_viewer.py::test_a_reactive_pour_replays_every_stream_and_the_live_verdicts",
-    'tactile-run protocol=slip_in_place': "tests/test_slip_in_place.py::test_the_protocol_runs_and_the_truth_is_what_was_commanded",
     'tactile-run protocol=slip_in_place protocol.motion=rotate protocol.tare=false surface=cylinder': HERE,
     'tactile-run protocol=sticks_sweep': NUMBERS,
     'tactile-run protocol=straws_sweep hardware=sim': NUMBERS,
