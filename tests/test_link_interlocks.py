@@ -89,16 +89,17 @@ def test_a_lost_link_starts_the_safe_stop_within_half_a_second(tmp_path, link, d
 def test_malformed_biotac_frames_are_counted_and_reported_and_the_run_goes_on(tmp_path):
     lines = []
     with EmulatedLab() as lab:
-        thread, _ = links.at(tmp_path / "run", 2.0, lambda: lab.ros.command("corrupt overflow 30"))
+        # 10 frames (0.1 s): fewer than safety.stale_periods (30), so the run goes on
+        thread, _ = links.at(tmp_path / "run", 2.0, lambda: lab.ros.command("corrupt overflow 10"))
         result = run_protocol(lab.cfg("protocol=straws_sweep"), tmp_path / "run", console=lines.append)
         thread.join(10)
     assert result.status == "success", result.error
     wire = xr.open_datatree(str(result.store), engine="zarr").attrs["wire"]
-    assert wire["biotac"]["refused"] == 30 and wire["biotac"]["reasons"] == {"ff electrodes: out of range": 30}
+    assert wire["biotac"]["refused"] == 10 and wire["biotac"]["reasons"] == {"ff electrodes: out of range": 10}
     assert "70000" in wire["biotac"]["last"]
-    assert json.loads((tmp_path / "run" / "run.json").read_text())["wire"]["biotac"]["refused"] == 30
+    assert json.loads((tmp_path / "run" / "run.json").read_text())["wire"]["biotac"]["refused"] == 10
     assert [line for line in lines if "refused on the wire" in line] == [
-        f"warning: biotac: 30 message(s) refused on the wire (30 ff electrodes: out of range); the last: "
+        f"warning: biotac: 10 message(s) refused on the wire (10 ff electrodes: out of range); the last: "
         f"{wire['biotac']['last']}"]
 
 

@@ -161,13 +161,14 @@ def test_malformed_biotac_frames_are_refused_counted_and_the_stream_goes_on(emu,
         end = time.monotonic() + 10                           # 0.4 s at 100 Hz; a loaded machine, longer
         while (emu.stats()["corrupted"] - before < 40 or bt.malformed < 40) and time.monotonic() < end:
             time.sleep(0.1)
-        time.sleep(0.2)
-        frames = bt.read()
         sent = emu.stats()["corrupted"] - before
         report = bt.wire_report()
         assert sent == 40 and report["refused"] == bt.malformed == 40
         assert report["reasons"] == {reason: 40} and report["last"]
-        assert len(frames) > 40 and all(f.is_valid() for f in frames)            # the rest still arrive
+        bt.read()
+        time.sleep(0.5)
+        frames = bt.read()                                                     # the good ones still arrive
+        assert len(frames) >= 25 and all(f.is_valid() for f in frames)
         bt.check_link()                                                        # the link itself is up
 
 
