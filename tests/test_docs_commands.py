@@ -81,7 +81,7 @@ TESTED: dict[str, object] = {
         "tests/test_docs_commands.py::test_the_suites_tiers_are_the_ones_the_docs_name",
     'pip install -e ".[cluster]"': "tests/test_launchers.py::test_analysis_sweep_on_submitit_local",
     'pip install -e ".[view]"': "tests/test_packaging.py::test_every_command_runs_from_an_empty_directory_with_the_checkouts_results",
-    'pip install -e ".[view]" && tactile-view outputs/<date>/<time>_straws_sweep --web':
+    'pip install -e ".[view]" && tactile-view outputs/<date>/<time>_straws_sweep_on_straws --web':
         "tests/test_viewer.py::test_web_serves_the_viewer_on_this_machine_only_until_stopped",
     'pip install dist/tactile_flow-0.2.0-py3-none-any.whl':
         "tests/test_packaging.py::test_every_command_runs_from_an_empty_directory_with_the_checkouts_results",
@@ -111,6 +111,7 @@ TESTED: dict[str, object] = {
     'python -m tactile_flow.tactile.warmup GROUP':
         "tests/test_warmup.py::test_a_first_analysis_compiles_in_children_and_then_nothing_itself",
     'python benchmarks/bench_analysis.py': BENCH,
+    'python benchmarks/bench_catalogue.py': BENCH,
     'python benchmarks/bench_import.py': BENCH,
     'python benchmarks/bench_kill.py': BENCH,
     'python benchmarks/bench_kill.py --trials 10': BENCH,
@@ -160,14 +161,14 @@ TESTED: dict[str, object] = {
         "tests/test_launchers.py::test_analysis_sweep_on_joblib_exits_with_the_worst_job_and_tables_every_run",
     'tactile-analyze analysis.workers=2': "tests/test_analysis_runs.py::test_workers_give_identical_results",
     'tactile-analyze run=<default dry run> analysis.progress=false':
-        "tests/test_analysis_runs.py::test_reanalysis_is_idempotent_and_keeps_history",
+        "tests/test_analysis_runs.py::test_the_same_analysis_is_reused_and_a_forced_one_is_identical_and_keeps_the_old",
     'tactile-analyze run=OUT': "tests/test_import_tree.py::test_a_tree_of_csv_folders_imports_in_one_call_and_analyses",
-    'tactile-analyze run=PATH [analysis.xxx=...]': "tests/test_analysis_runs.py::test_reanalysis_is_idempotent_and_keeps_history",
+    'tactile-analyze run=PATH [analysis.xxx=...]': "tests/test_analysis_runs.py::test_the_same_analysis_is_reused_and_a_forced_one_is_identical_and_keeps_the_old",
     'tactile-analyze run=outputs/imported/ds':
         "tests/test_import_tree.py::test_a_tree_of_csv_folders_imports_in_one_call_and_analyses",
     'tactile-analyze run=outputs/imported/rest/run.zarr':
         "tests/test_import_bag.py::test_real_resting_recording_analyses_to_no_contact",
-    'tactile-analyze run=…': "tests/test_analysis_runs.py::test_reanalysis_is_idempotent_and_keeps_history",
+    'tactile-analyze run=…': "tests/test_analysis_runs.py::test_the_same_analysis_is_reused_and_a_forced_one_is_identical_and_keeps_the_old",
     'tactile-analyze run=… analysis.tactile.render=exact|linear': "tests/test_analysis_runs.py::test_sweep_labels_estimates_and_score",
     # ------------------------------------------------------------------ the others
     'tactile-emulate':
@@ -189,6 +190,30 @@ TESTED: dict[str, object] = {
     'tactile-view RUN_DIR --fps 100': Variant("tactile-view {run} --fps 100 --save {tmp}/run.rrd", NO_DISPLAY),
     'tactile-view RUN_DIR --save run.rrd': Variant("tactile-view {run} --save {tmp}/run.rrd", "the run filled in"),
     'tactile-view RUN_DIR --web': "tests/test_viewer.py::test_web_serves_the_viewer_on_this_machine_only_until_stopped",
+    'tactile-analyze -m run=X analysis.flow.method=farneback,dis':
+        "tests/test_analyses_kept.py::test_a_sweep_over_flow_methods_on_joblib_keeps_both_analyses_and_names_each_row",
+    'tactile-analyze ... name=NAME': "tests/test_analyses_kept.py::test_names_a_user_gives",
+    # ------------------------------------------------------------------ tactile-runs
+    'tactile-runs diff': "tests/test_catalogue.py::test_show_and_diff_tell_what_a_run_is_whatever_its_name",
+    'tactile-runs diff RUN_A RUN_B': "tests/test_catalogue.py::test_show_and_diff_tell_what_a_run_is_whatever_its_name",
+    'tactile-runs index [PATH ...]': "tests/test_catalogue.py::test_index_notices_new_changed_moved_and_deleted_runs",
+    'tactile-runs index outputs multirun': "tests/test_catalogue.py::test_index_notices_new_changed_moved_and_deleted_runs",
+    'tactile-runs list [FILTER ...]': "tests/test_catalogue.py::test_the_issues_filter_and_every_kind_of_key",
+    "tactile-runs list protocol=straws_sweep 'protocol.sweep_speed>=10' 'score.width_error_mm_median<1' "
+    "since=2026-11-01": "tests/test_catalogue.py::test_the_issues_filter_and_every_kind_of_key",
+    'tactile-runs list protocol=straws_sweep protocol.sweep_speed>=10 score.width_error_mm_median<1 status=success '
+    'since=2026-11-01': "tests/test_catalogue.py::test_the_issues_filter_and_every_kind_of_key",
+    'tactile-runs list|show|diff|index': "tests/test_catalogue.py::test_every_option_is_in_the_help",
+    'tactile-runs reproduce': "tests/test_reproduce.py::test_a_run_from_a_search_path_folder_reproduces_bit_identical_after_the_folder_is_gone",
+    'tactile-runs reproduce RUN --out elsewhere --allow-code-change':
+        "tests/test_reproduce.py::test_a_run_on_an_edited_tree_is_refused_once_the_edit_is_gone_and_reproduces_with_its_diff",
+    'tactile-runs reproduce RUN_DIR': "tests/test_reproduce.py::test_a_run_from_a_search_path_folder_reproduces_bit_identical_after_the_folder_is_gone",
+    'tactile-runs reproduce multirun/2026-11-27/10-02-11-000000':
+        "tests/test_docs_commands.py::test_a_sweeps_directory_reproduces_every_job",
+    'tactile-runs reproduce outputs/2026-11-27/11-15-07-687911_straws_sweep_on_straws':
+        "tests/test_reproduce.py::test_a_run_from_a_search_path_folder_reproduces_bit_identical_after_the_folder_is_gone",
+    'tactile-runs show': "tests/test_catalogue.py::test_show_and_diff_tell_what_a_run_is_whatever_its_name",
+    'tactile-runs show RUN': "tests/test_catalogue.py::test_show_and_diff_tell_what_a_run_is_whatever_its_name",
     # ------------------------------------------------------------------ tactile-run
     'tactile-run --help': HERE,
     'tactile-run --list': HERE,
@@ -224,8 +249,6 @@ TESTED: dict[str, object] = {
         Variant("tactile-run -m +experiment=speeds_by_surface plan_only=true hydra.sweep.dir={tmp}/speeds",
                 "6 whole runs: every job composed and planned (a recorded sweep: tests/test_cli.py)"),
     'tactile-run -m ...': "tests/test_cli.py::test_multirun_two_by_two_gives_four_runs_and_a_summary",
-    'tactile-run -m ... resume=true':
-        "tests/test_cli.py::test_resumed_sweep_skips_successes_reruns_the_rest_and_refuses_a_changed_config",
     'tactile-run -m hydra/launcher=joblib hydra.launcher.n_jobs=2 protocol.sweep_speed=10,20':
         "tests/test_command_lines.py::test_a_simulated_sweep_runs_on_the_joblib_launcher",
     'tactile-run -m protocol=straws_sweep,sticks_sweep protocol.sweep_speed=5,10,20':
@@ -394,3 +417,18 @@ def test_the_measured_table_is_what_the_runs_give(tmp_path):
     said = ", ".join(f"{n.replace('_', ' ')} {phases[n]['error_ms']:+.1f}".replace("-", "−")
                      for n in ("pour", "initial_slip", "rotation", "downward", "full_slip")) + " ms"
     assert f"(seed 0, `tactile-run protocol=pour_grasp`): {said}" in text, said
+
+
+@pytest.mark.slow
+def test_a_sweeps_directory_reproduces_every_job(tmp_path):
+    """``tactile-runs reproduce multirun/...`` (docs/reproducibility.md): a recorded sweep's
+    directory, every job done again and compared."""
+    env = {**__import__("os").environ, "MPLBACKEND": "Agg"}
+    sweep = subprocess.run([str(BIN / "tactile-run"), "-m", "protocol.sweep_speed=10,20", "analyze=false",
+                            "progress=false", "hydra.sweep.dir=sweep"], cwd=tmp_path, capture_output=True, text=True,
+                           timeout=900, env=env)
+    assert sweep.returncode == 0, sweep.stderr[-1500:]
+    again = subprocess.run([str(BIN / "tactile-runs"), "reproduce", "sweep"], cwd=tmp_path, capture_output=True,
+                           text=True, timeout=900, env=env)
+    assert again.returncode == 0, again.stderr[-1500:]
+    assert again.stdout.count("reproduced: identical") == 2, again.stdout[-1500:]
