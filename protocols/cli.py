@@ -283,7 +283,7 @@ class SweepSummary(jobresults.SweepResults):
         root = Path(config.hydra.sweep.dir)
         rows = sweep_rows(root)
         recorded = {r["job"] for r in rows}          # a job that recorded nothing is a row too, saying why
-        rows += [{"job": Path(r["dir"]).name, "overrides": " ".join(r.get("overrides") or []),
+        rows += [{"job": Path(r["dir"]).name, **override_cells(r.get("overrides") or []),
                   "status": jobresults.outcome(r), "error": r.get("error") or ""}
                  for r in results if r["code"] != 0 and Path(r["dir"]).name not in recorded]
         rows.sort(key=lambda r: _job_number(r["job"]))
@@ -320,11 +320,7 @@ def sweep_rows(root: Path) -> list[dict]:
         info = json.loads(run_json.read_text())
         overrides_file = job / ".hydra" / "overrides.yaml"
         overrides = OmegaConf.load(overrides_file) if overrides_file.exists() else info.get("overrides") or []
-        row = {"job": job.name}
-        for o in overrides:
-            key, _, value = str(o).partition("=")
-            if key.lstrip("+~") not in QUIET_OVERRIDES:
-                row[key.lstrip("+~")] = value
+        row = {"job": job.name, **override_cells(overrides)}
         row.update({"status": info.get("status"), "run_id": info.get("run_id"), "error": info.get("error") or "",
                     "analysis": resume.analysis_state(job)})
         current = analyses.current_dir(job)
@@ -334,6 +330,17 @@ def sweep_rows(root: Path) -> list[dict]:
             row.update({f"result.{k}": v for k, v in runinfo.flatten(headline).items()})
         rows.append(row)
     return rows
+
+
+def override_cells(overrides) -> dict[str, str]:
+    """A job's overrides as its table's cells: key → value (``protocol.sweep_speed`` → ``20``),
+    those that only say how a sweep is shown (:data:`QUIET_OVERRIDES`) left out."""
+    cells = {}
+    for o in overrides:
+        key, _, value = str(o).partition("=")
+        if key.lstrip("+~") not in QUIET_OVERRIDES:
+            cells[key.lstrip("+~")] = value
+    return cells
 
 
 def swept_columns(rows: list[dict]) -> list[str]:

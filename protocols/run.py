@@ -118,7 +118,8 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
                 outcome, stats = _close(run_dir, prov, recorder, monitor, lab, outcome)
                 for line in wire_warnings(wire_reports(lab)):
                     console(line)
-    register_quietly(run_dir, console)            # tactile-runs list finds it (its analysis updates it)
+    with interrupts.during("writing"):             # a signal in the catalogue's write waits for it (as for the store)
+        register_quietly(run_dir, console)        # tactile-runs list finds it (its analysis updates it)
     return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)
 
 

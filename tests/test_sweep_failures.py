@@ -34,7 +34,11 @@ def test_a_refused_job_in_the_middle_of_a_sweep_is_counted_and_named(tmp_path):
     assert named == ["job 1 (protocol.sweep_speed=900 analyze=False progress=False): refused (bad input): error: "
                      "protocol.steps[3].sweep.speed: 900.0 mm/s exceeds the arm's limit hardware.arm.max_speed_m_s=0.25"]
     assert "sweep sweep: 3 jobs: 2 succeeded, 1 refused (bad input); summary.md, summary.csv" in proc.stdout
-    table = (tmp_path / "sweep" / "summary.md").read_text().splitlines()[2:]
-    assert [row.split(" | ")[2] for row in table] == ["success", "refused (bad input)", "success"]
-    assert "900.0 mm/s exceeds" in table[1]
-    assert json.loads((tmp_path / "sweep" / "0_straws_sweep" / "run.json").read_text())["status"] == "success"
+    import csv
+    with open(tmp_path / "sweep" / "summary.csv") as f:
+        table = list(csv.DictReader(f))
+    assert [(r["protocol.sweep_speed"], r["status"]) for r in table] == [
+        ("10", "success"), ("900", "refused (bad input)"), ("20", "success")]
+    assert "900.0 mm/s exceeds" in table[1]["error"]
+    (first,) = (tmp_path / "sweep").glob("0_*/run.json")
+    assert json.loads(first.read_text())["status"] == "success"
