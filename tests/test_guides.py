@@ -234,6 +234,13 @@ def test_the_new_step_kind_plans_runs_and_enters_the_table(tmp_path):
     s = score(run_dir)
     assert s["summary"]["crossings_matched"] == 9 and s["all_targets_met"] is True
     assert "9 crossings" in text and "meets the sweep targets" in text
+    # the numbers the guide quotes are the run's (issue 34, item 13: they had drifted, 0.6° for 0.88°)
+    quoted = re.search(r"direction error at most ([\d.]+)°, width error median ([\d.]+) mm, boundary error "
+                       r"median ([\d.]+) ms", one_spaced(text))
+    assert quoted, "the guide no longer quotes the run's numbers"
+    measured = s["summary"]
+    assert quoted.groups() == (f"{measured['direction_error_deg_max']:.2g}", f"{measured['width_error_mm_median']:.1f}",
+                               f"{measured['boundary_error_ms_median']:.0f}"), measured
     # "python docs/protocol_tables.py adds move_by to the table"
     table = [sys.executable, "docs/protocol_tables.py"]
     assert subprocess.run([*table, "--check"], cwd=tree, capture_output=True).returncode == 1

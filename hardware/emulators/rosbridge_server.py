@@ -14,7 +14,12 @@ roslibpy client uses — ``advertise``/``unadvertise``, ``publish``, ``subscribe
   each named joint moves from where it is to the last point's position, reaching it at
   that point's ``time_from_start`` (linear in time).
 
-Control lines on stdin: ``pause``/``resume`` publishing (a hung driver), ``stats``.
+Control lines on stdin (each answered by one ``OK <json>`` or ``ERR <reason>`` line):
+``pause``/``resume`` publishing (a hung driver), ``stats``, and the faults a real link can
+show: ``corrupt MODE N`` (the next N ``BiotacAll`` messages malformed: ``garbage``, a
+``tactiles`` field that is not a list; ``overflow``, an electrode at 70000, beyond any 16-bit
+count; ``missing``, the first finger without its ``pdc``), ``disconnect TOPIC`` (close the
+websocket of every client subscribed to ``TOPIC``: the link of that one device lost).
 """
 
 from __future__ import annotations
@@ -33,6 +38,19 @@ from ..hand import JOINT_NAMES
 from .process import EmulatorProcess
 
 UNCONNECTED = {"pac0": 0, "pac1": 0, "pac": [], "pdc": -22072, "tac": 32570, "tdc": 0, "electrodes": [0] * 24}
+CORRUPTIONS = ("garbage", "overflow", "missing")
+
+
+def corrupted(msg: dict, mode: str) -> dict:
+    """``msg`` (a BiotacAll) made malformed as ``mode`` says (see the module doc)."""
+    if mode == "garbage":
+        return {**msg, "tactiles": "garbage"}
+    tactiles = [dict(t) for t in msg["tactiles"]]
+    if mode == "overflow":
+        tactiles[0]["electrodes"] = [*tactiles[0]["electrodes"][:6], 70000, *tactiles[0]["electrodes"][7:]]
+    else:
+        tactiles[0].pop("pdc")
+    return {**msg, "tactiles": tactiles}
 TOPIC_TYPES = {"/rh/tactile": "sr_robot_msgs/BiotacAll", "/joint_states": "sensor_msgs/JointState",
                "/rh_trajectory_controller/command": "trajectory_msgs/JointTrajectory"}
 
@@ -119,6 +137,7 @@ class Bridge:
         self.paused = False
         self.published = {"/rh/tactile": 0, "/joint_states": 0}
         self.js_seq = 0
+        self.corrupt_mode, self.corrupt_left, self.corrupted = None, 0, 0
 
     def handle(self, client, msg: dict) -> None:
         op = msg.get("op")
@@ -148,7 +167,12 @@ class Bridge:
         if self.paused or not self.clients:
             return
         wall = time.time()
-        self._publish("/rh/tactile", self.biotacs.message(wall))
+        msg = self.biotacs.message(wall)
+        if self.corrupt_left > 0:
+            msg = corrupted(msg, self.corrupt_mode)
+            self.corrupt_left -= 1
+            self.corrupted += 1
+        self._publish("/rh/tactile", msg)
         self.js_seq += 1
         q = self.hand.positions(time.monotonic())
         self._publish("/joint_states", {"header": {"seq": self.js_seq, "stamp": ros_time(wall), "frame_id": ""},
@@ -168,11 +192,24 @@ class Bridge:
         if cmd in ("pause", "resume"):
             self.paused = cmd == "pause"
             return f"OK {json.dumps({'paused': self.paused})}"
+        words = cmd.split()
+        if words[:1] == ["corrupt"]:
+            if len(words) != 3 or words[1] not in CORRUPTIONS or not words[2].isdigit():
+                return f"ERR expected corrupt {'|'.join(CORRUPTIONS)} N"
+            self.corrupt_mode, self.corrupt_left = words[1], int(words[2])
+            return f"OK {json.dumps({'corrupt': words[1], 'frames': int(words[2])})}"
+        if words[:1] == ["disconnect"] and len(words) == 2:
+            dropped = [c for c in list(self.clients) if words[1] in c.subscriptions]
+            for c in dropped:
+                self.clients.discard(c)
+                c.dropConnection(abort=True)          # as a cable pulled: no closing handshake
+            return f"OK {json.dumps({'disconnected': len(dropped)})}"
         if cmd == "stats":
             return "OK " + json.dumps({"published": self.published, "clients": len(self.clients),
+                                       "corrupted": self.corrupted,
                                        "hand_commands": self.hand.commands, "biotac_seq": self.biotacs.seq,
                                        "positions": dict(zip(JOINT_NAMES, self.hand.positions(time.monotonic()).round(4).tolist()))})
-        return f"ERR unknown command {cmd!r}; expected pause, resume, stats"
+        return f"ERR unknown command {cmd!r}; expected pause, resume, stats, corrupt MODE N, disconnect TOPIC"
 
 
 def make_protocol(bridge: Bridge):
