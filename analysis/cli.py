@@ -35,6 +35,8 @@ from hydra.types import RunMode
 
 import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import signals_received
+from tactile_flow.cliapp.sensors import named_sensor
+from tactile_flow.validation import ConfigError
 
 from .config import AnalysisConfigError
 from .load import AnalysisInputError
@@ -81,10 +83,12 @@ def table_dir(spec: str) -> Path:
 
 
 def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
-                  table: bool = True) -> tuple[int, list[dict]]:
+                  table: bool = True, sensor=None) -> tuple[int, list[dict]]:
     """Analyse the run stores ``spec`` names (:func:`find_stores`); never raises. The exit
     code and one row per run (``run``, ``result``, then the summary's ``headline``); with
-    ``table`` and several runs, their table is written (:func:`table_dir`)."""
+    ``table`` and several runs, their table is written (:func:`table_dir`). ``sensor``: the
+    :class:`tactile.sensor.SensorModel` asked for (``sensor=``); a store recorded with another
+    is refused (bad input), the others analysed."""
     from .run import analyze_run
     stores = find_stores(spec) if spec else []
     if not stores:
@@ -96,10 +100,10 @@ def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
         row = {"run": str(store)}
         rows.append(row)
         try:
-            summary = analyze_run(store, analysis_cfg, console=console)
+            summary = analyze_run(store, analysis_cfg, console=console, sensor=sensor)
             row["result"] = "analysed"
             row.update(summary.get("headline", {}))
-        except (AnalysisInputError, AnalysisConfigError) as exc:
+        except (AnalysisInputError, ConfigError) as exc:
             _report(exc, "error", verbose)
             row["result"] = f"error: {exc}"
             code = max(code, BAD_INPUT)
@@ -173,9 +177,15 @@ def _app(cfg) -> None:
         jobresults.record(BAD_INPUT)
         return
     sweep = HydraConfig.get().mode == RunMode.MULTIRUN          # the sweep's table, not one per job
+    try:
+        sensor = named_sensor(cfg.get("sensor"))
+    except ConfigError as exc:
+        _report(exc, "error", bool(cfg.get("verbose")))
+        jobresults.record(BAD_INPUT)
+        return
     code, rows = 0, []
     for spec in (run if OmegaConf.is_list(run) else [run]):
-        c, r = analyse_paths(str(spec), cfg.analysis, bool(cfg.get("verbose")), table=not sweep)
+        c, r = analyse_paths(str(spec), cfg.analysis, bool(cfg.get("verbose")), table=not sweep, sensor=sensor)
         code, rows = max(code, c), rows + r
         if c == INTERRUPTED:
             break

@@ -87,7 +87,7 @@ class AnalysisConfig:
 
     enabled: bool = True
     tactile: TactileConfig = field(default_factory=TactileConfig)
-    views: tuple[str, ...] = ("bottom", "left", "right")
+    views: tuple[str, ...] = ("bottom", "left", "right")      # () in a config: the sensor model's (for_sensor)
     baseline_fallback_window_s: float = 0.5
     baseline_fallback_contact_min: float = 20.0
     pressure_signal: str = "auto"
@@ -203,9 +203,12 @@ def load_config(node=None) -> AnalysisConfig:
         raise AnalysisConfigError("analysis.flow.reference_time_s: expected a time ≥ 0 s (since run start) "
                                   f"with flow.reference=time, got {ref_time!r}")
     _refuse_unknown("analysis.flow", fl, set(_FLOW_KEYS) | _FLOW_ANALYSIS_KEYS)
-    views = d.get("views", ["bottom", "left", "right"])
-    if not isinstance(views, list) or not views or not all(isinstance(v, str) for v in views):
-        raise AnalysisConfigError(f"analysis.views: expected a non-empty list of view names, got {views!r}")
+    views = d.get("views")
+    if views is None:
+        views = []                                             # null: the sensor model's views (for_sensor)
+    elif not isinstance(views, list) or not views or not all(isinstance(v, str) for v in views):
+        raise AnalysisConfigError(f"analysis.views: expected a non-empty list of view names (or null: the sensor "
+                                  f"model's), got {views!r}")
     tk = {k: _typed(f"tactile.{k}", v, _TACTILE_KEYS[k]) for k, v in tac.items()}
     for k in ("size", "intensity_range"):
         if k in tk:
@@ -244,7 +247,7 @@ def load_config(node=None) -> AnalysisConfig:
     con = _section(Contact, "contact", d.get("contact") or {})
     sl = dict(d.get("slip") or {})
     if "views" in sl:
-        if not isinstance(sl["views"], list) or not sl["views"] or not all(v in views for v in sl["views"]):
+        if not isinstance(sl["views"], list) or not sl["views"] or not all(v in views or not views for v in sl["views"]):
             raise AnalysisConfigError(f"analysis.slip.views: expected a non-empty list of the analysed views "
                                       f"{views}, got {sl['views']!r}")
         sl["views"] = tuple(sl["views"])
@@ -264,6 +267,28 @@ def load_config(node=None) -> AnalysisConfig:
                           static_every=static_every,
                           intensity=intensity,
                           raw=raw, **top)
+
+
+def for_sensor(cfg: AnalysisConfig, sensor) -> AnalysisConfig:
+    """``cfg`` for the sensor model ``sensor`` (:class:`tactile.sensor.SensorModel`): with no
+    ``analysis.views`` given, the sensor's views; views it does not have (nor
+    ``tactile.custom_views``) are an :class:`AnalysisConfigError` naming them, as are slip
+    evidence views outside the analysed ones (a flat pad has only ``bottom``)."""
+    known = (*sensor.views, *cfg.tactile.custom_views)
+    views = tuple(cfg.views) or tuple(sensor.views)
+    bad = [v for v in views if v not in known]
+    if bad:
+        raise AnalysisConfigError("analysis.views", f"{bad} not a view of sensor {sensor.name}; expected some of "
+                                                    f"{', '.join(known)}")
+    slip_views = tuple(v for v in cfg.slip.views if v in views)
+    if not slip_views:
+        raise AnalysisConfigError("analysis.slip.views", f"{list(cfg.slip.views)}: none of them is analysed for sensor "
+                                                         f"{sensor.name} (views {', '.join(views)})")
+    if "views" in (cfg.raw.get("slip") or {}) and slip_views != tuple(cfg.slip.views):
+        raise AnalysisConfigError("analysis.slip.views", f"{list(cfg.slip.views)}: expected some of the analysed "
+                                                         f"views {list(views)}")
+    return dataclasses.replace(cfg, views=views, tactile=dataclasses.replace(cfg.tactile, views=views),
+                               slip=dataclasses.replace(cfg.slip, views=slip_views))
 
 
 def as_dict(cfg: AnalysisConfig) -> dict[str, Any]:

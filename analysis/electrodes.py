@@ -87,13 +87,14 @@ class StoredElectrodes:
         return StoredElectrodes(self._array, base[keep], self._on_error)
 
 
-def screen_counts(source) -> tuple[np.ndarray, np.ndarray, str]:
-    """One pass over the stored electrodes (T, F, 24) counts: which fingers read all 24
-    electrodes in range in each frame, which frames read 0 everywhere, and a checksum.
+def screen_counts(source, count_range=COUNT_RANGE) -> tuple[np.ndarray, np.ndarray, str]:
+    """One pass over the stored electrodes (T, F, N) counts: which fingers read all N
+    electrodes within ``count_range`` (the sensor model's ``limits.electrode_counts``) in each
+    frame, which frames read 0 everywhere, and a checksum.
 
     Returns ``(in_range (T, F) bool, all_zero (T,) bool, sha256 hex)``; the checksum is of the
     counts as float64, frame after frame (the same for a plain array and a stored source)."""
-    lo, hi = COUNT_RANGE
+    lo, hi = count_range
     in_range, zero = [], []
     h = hashlib.sha256()
     chunks = source.chunks() if isinstance(source, StoredElectrodes) else \

@@ -30,9 +30,9 @@ from tactile_flow.tactile import warmup
 from . import figures as figs
 from . import results
 from . import score as scoring
-from .config import as_dict, load_config
+from .config import as_dict, for_sensor, load_config
 from .headline import headline, whole_contact_slips
-from .load import AnalysisInputError, load_run, open_truth
+from .load import AnalysisInputError, load_run, open_truth, peek_sensor
 from .pipeline import analyse, get_model
 
 SCHEMA_VERSION = "1.0"
@@ -65,31 +65,39 @@ def _segments_json(a) -> list[dict]:
     return out
 
 
-def analyze_run(store_path, analysis_cfg=None, *, console=print) -> dict:
+def analyze_run(store_path, analysis_cfg=None, *, console=print, sensor=None) -> dict:
     """Analyse ``store_path`` (a ``run.zarr``) with the ``analysis`` config node; write the outputs
-    beside it; return the summary dict. Raises :class:`AnalysisInputError` (nothing written) when
-    the input cannot be analysed at all, :class:`analysis.config.AnalysisConfigError` on bad
-    parameters."""
+    beside it; return the summary dict. The sensor model is the one the store was recorded
+    with; ``sensor`` (a :class:`tactile.sensor.SensorModel`) asks for one, which must be that
+    one (:func:`runstore.sensors.require_same_sensor`). Raises :class:`AnalysisInputError`
+    (nothing written) when the input cannot be analysed at all, a ``ConfigError``
+    (:class:`analysis.config.AnalysisConfigError`, ``tactile.sensor.SensorModelError``) on bad
+    parameters or a store of another sensor model."""
     cfg = load_config(analysis_cfg)
     store_path = Path(store_path)
     if not cfg.enabled:
         console(f"analysis: disabled (analysis.enabled=false); {store_path} not analysed")
         return {"headline": {"status": "disabled"}}
     if not (store_path / "zarr.json").is_file():
-        return _analyse_and_write(store_path, cfg, console)     # load_run says what is wrong; nothing to lock
+        return _analyse_and_write(store_path, cfg, console, sensor)   # load_run says what is wrong; nothing to lock
     with rundir.locked(store_path.parent):
         removed = results.remove_debris(store_path.parent)
         if removed:
             console(f"analysis: removed what a killed analysis left in {store_path.parent}: {', '.join(removed)}")
-        return _analyse_and_write(store_path, cfg, console)
+        return _analyse_and_write(store_path, cfg, console, sensor)
 
 
-def _analyse_and_write(store_path: Path, cfg, console) -> dict:
+def _analyse_and_write(store_path: Path, cfg, console, sensor=None) -> dict:
     signals_before = signals_received()          # one more by the end: a library swallowed its interrupt
+    recorded = peek_sensor(store_path, sensor)   # the store's model (a refusal if sensor= is another)
+    if recorded is not None:
+        cfg = for_sensor(cfg, recorded)
     # a first analysis on this machine compiles the kernels on every core while the run loads
-    with warmup.compiling(cfg.tactile, cfg.workers, console):
-        run = load_run(store_path, in_memory_frames=cfg.memory.chunk_frames)
-    model = get_model(cfg.tactile)
+    with warmup.compiling(cfg.tactile, cfg.workers, console, sensor=recorded):
+        run = load_run(store_path, in_memory_frames=cfg.memory.chunk_frames, sensor=sensor)
+    if run.sensor_how != "recorded":
+        console(f"analysis: sensor model {run.sensor.name} ({run.sensor_how})")
+    model = get_model(cfg.tactile, run.sensor)
     with long_lived_frozen():
         return _analyse(store_path, run, model, cfg, console, signals_before)
 
@@ -107,6 +115,7 @@ def _analyse(store_path: Path, run, model, cfg, console, signals_before: int) ->
                             "dropped_invalid_frames": run.dropped_invalid},
                   "baseline": a.prepared.baseline_source, "baseline_kind": a.prepared.baseline.kind,
                   "contact_method": a.contact_method, "pressure_signal": a.prepared.pressure_name,
+                  "sensor": {**run.sensor.summary(), "how": run.sensor_how},
                   "preparation": a.prepared.preparation}
     score = None
     truth = open_truth(run)

@@ -47,11 +47,12 @@ BIOTAC_SOURCES = ("rosbridge", "serial")
 ARM_PLAN_KEYS = ("home_pose", "max_speed_m_s", "max_accel_m_s2", "stop_accel_m_s2", "max_contact_force_n")
 
 
-def make_real_lab(hw_cfg, surface_cfg=None, *, key: str = "hardware") -> Lab:
+def make_real_lab(hw_cfg, surface_cfg=None, *, key: str = "hardware", sensor=None) -> Lab:
     """Build the lab of ``conf/hardware/lab.yaml``; devices are returned unconnected.
 
     ``hw_cfg``: dict or OmegaConf node; ``surface_cfg``: as ``conf/surface/*.yaml`` (geometry
-    shared with the simulator), or None.
+    shared with the simulator), or None; ``sensor``: the fingertips'
+    :class:`tactile.sensor.SensorModel` (None: the BioTac SP).
     """
     hw = to_plain(hw_cfg) or {}
     if not isinstance(hw, dict):
@@ -68,13 +69,13 @@ def make_real_lab(hw_cfg, surface_cfg=None, *, key: str = "hardware") -> Lab:
     surface = load_surface(surface_cfg) if surface_cfg is not None else None
     return Lab(arm=make_arm(hw.get("arm"), workspace, f"{key}.arm"),
                    hand=ShadowHand(hand_cfg, clock),
-                   biotac=make_biotacs(hw.get("biotac"), fingers, rosbridge, f"{key}.biotac", clock),
+                   biotac=make_biotacs(hw.get("biotac"), fingers, rosbridge, f"{key}.biotac", clock, sensor),
                    pump=SerialPump(_make(SerialPumpConfig, hw.get("pump"), f"{key}.pump"), clock),
                    scale=SerialScale(_make(SerialScaleConfig, hw.get("scale"), f"{key}.scale"), clock),
                    clock=clock, surface=surface)
 
 
-def make_biotacs(data, fingers, rosbridge: RosbridgeConfig, key: str, clock=None):
+def make_biotacs(data, fingers, rosbridge: RosbridgeConfig, key: str, clock=None, sensor=None):
     """RosbridgeBiotacs or SerialBiotacs, as ``biotac.source`` says; the keys of the other source
     (``topic`` for serial, ``port``/``baudrate`` for rosbridge) are accepted and ignored, so one
     ``lab.yaml`` can hold both."""
@@ -84,11 +85,11 @@ def make_biotacs(data, fingers, rosbridge: RosbridgeConfig, key: str, clock=None
         raise ConfigError(f"{key}.source", f"expected one of {', '.join(BIOTAC_SOURCES)}, got {source!r}")
     if source == "serial":
         data.pop("topic", None)
-        return SerialBiotacs(_make(SerialBiotacConfig, data, key, fingers=tuple(fingers)), clock)
+        return SerialBiotacs(_make(SerialBiotacConfig, data, key, fingers=tuple(fingers)), clock, sensor)
     data.pop("port", None)
     data.pop("baudrate", None)
     return RosbridgeBiotacs(_make(RosbridgeBiotacConfig, data, key, rosbridge=rosbridge, fingers=tuple(fingers)),
-                            clock)
+                            clock, sensor)
 
 
 def make_arm(data, workspace: WorkspaceConfig, key: str):

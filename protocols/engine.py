@@ -56,7 +56,7 @@ class RunContext(Geometry):
     """What a step's ``run`` sees: the lab, the recorder, parameters and helpers."""
 
     def __init__(self, lab, recorder, cfg, progress=None, live=None, interrupts: Interrupts | None = None):
-        super().__init__(cfg.hardware, lab.surface, cfg.protocol.finger)
+        super().__init__(cfg.hardware, lab.surface, cfg.protocol.finger, lab.biotac.sensor_model)
         self.live = live                          # a protocols.live.LiveMonitor, or None
         self.hand_targets: dict[str, float] = {}  # joint angles commanded so far (rad)
         self.hand_until = -np.inf                 # clock time the commanded hand motion ends

@@ -19,7 +19,6 @@ from tactile_flow.hardware.arm import trapezoid_time
 from tactile_flow.hardware.errors import brief
 from tactile_flow.hardware.transforms import rotvec_to_matrix
 from tactile_flow.hardware.surfaces import Surface, load_surface
-from tactile_flow.tactile.geometry import cached_fit_ellipsoid, load_taxels
 
 from .steps import Criterion, ProtocolError, Repeat, Step, parse_steps
 
@@ -56,11 +55,13 @@ class Geometry:
     """Where the TCP must be for the protocol's finger to touch a given place.
 
     ``hw.fingertips[finger]`` is the sensor's pose in the TCP frame (m, rad); the pad's
-    lowest point in the sensor frame is the pole of the BioTac ellipsoid fitted to the
-    taxels (:mod:`tactile.geometry`). The TCP keeps the orientation of the home pose.
+    lowest point in the sensor frame is the pole of the sensor model's surface (the
+    ellipsoid of a BioTac, the centre of a flat pad: :attr:`tactile.sensor.SurfaceShape.pole`;
+    ``sensor``, a :class:`tactile.sensor.SensorModel`, default the BioTac SP). The TCP keeps
+    the orientation of the home pose.
     """
 
-    def __init__(self, hw, surface: Surface | None, finger: str):
+    def __init__(self, hw, surface: Surface | None, finger: str, sensor=None):
         if finger not in hw.fingertips:
             raise ProtocolError("protocol.finger", f"expected one of {sorted(hw.fingertips)}, got {finger!r}")
         self.surface = surface
@@ -69,8 +70,11 @@ class Geometry:
         self.stage_cfg = hw.get("stage")          # the object stage's settings; None: the lab has none
         tip = np.asarray(hw.fingertips[finger], float)
         self.R_tip = rotvec_to_matrix(tip[3:])
-        fit = cached_fit_ellipsoid(load_taxels())
-        pole_sensor = (fit.centre + np.array([0.0, 0.0, -fit.axes[2]])) * 1e-3
+        if sensor is None:
+            from tactile_flow.tactile.sensor import builtin_sensor
+            sensor = builtin_sensor()
+        self.sensor = sensor
+        pole_sensor = sensor.shape.pole * 1e-3
         self.pad_offset = self.R_tip @ pole_sensor + tip[:3]                     # TCP frame, m
 
     def tcp_for_pad(self, pad_world) -> np.ndarray:
@@ -154,8 +158,9 @@ class PlannedStep:
 class PlanContext(Geometry):
     """The planner's running state: planned pose, time and hand targets, parameters, limits."""
 
-    def __init__(self, hw, surface, params, limits: Limits, max_duration: float = DEFAULT_MAX_DURATION_S):
-        super().__init__(hw, surface, params.finger)
+    def __init__(self, hw, surface, params, limits: Limits, max_duration: float = DEFAULT_MAX_DURATION_S,
+                 sensor=None):
+        super().__init__(hw, surface, params.finger, sensor)
         self.params, self.limits, self.max_duration = params, limits, max_duration
         self.pose = self.home.copy()
         self.time = 0.0
@@ -246,12 +251,15 @@ def _point(p) -> str:
 @dataclass
 class Plan:
     """The checked timeline. ``setup``: how many leading steps run before the recording starts
-    (``protocol.tare: false``: the steps up to the first ``press`` make the contact unrecorded)."""
+    (``protocol.tare: false``: the steps up to the first ``press`` make the contact unrecorded).
+    ``sensor``: the fingertips' :class:`tactile.sensor.SensorModel` it was planned for (read
+    once from the config; the run hands it to the lab, the store and the live monitor)."""
 
     protocol: str
     steps: list[PlannedStep]
     labels: list[str]
     setup: int = 0
+    sensor: object = field(default=None, repr=False)
 
     @property
     def duration(self) -> float:
@@ -265,19 +273,23 @@ class Plan:
         return [p.step.key for p in self.steps if reacts(p.step)]
 
 
-def make_plan(cfg) -> Plan:
+def make_plan(cfg, sensor=None) -> Plan:
     """Parse and check ``cfg.protocol`` against ``cfg.hardware`` and ``cfg.surface``, and its
-    expected duration against ``safety.max_duration_s``.
+    expected duration against ``safety.max_duration_s``, for the fingertips of ``sensor``
+    (a :class:`tactile.sensor.SensorModel`; by default the config's ``sensor`` group, read here).
 
     Raises :class:`ProtocolError` (or the hardware's ``ConfigError``) naming the key at
     fault; never touches hardware.
     """
+    if sensor is None:
+        from tactile_flow.cliapp.sensors import composed_sensor
+        sensor = composed_sensor(cfg)
     params = cfg.protocol
     raw = OmegaConf.to_container(params.steps, resolve=True) if OmegaConf.is_config(params.steps) else params.steps
     steps = parse_steps(raw)
     surface = load_surface(cfg.surface) if cfg.get("surface") is not None else None
     max_duration = _max_duration(cfg)
-    ctx = PlanContext(cfg.hardware, surface, params, Limits.from_hardware(cfg.hardware), max_duration)
+    ctx = PlanContext(cfg.hardware, surface, params, Limits.from_hardware(cfg.hardware), max_duration, sensor)
     ctx.check_parameters()
     if params.finger not in cfg.hardware.fingers:
         raise ProtocolError("protocol.finger", f"{params.finger!r} has no sensor in hardware.fingers "
@@ -302,7 +314,8 @@ def make_plan(cfg) -> Plan:
             planned.append(PlannedStep(len(planned), s, start, duration, waypoints))
 
     walk(steps)
-    return Plan(protocol=params.name, steps=planned, labels=list(params.labels), setup=_setup_steps(params, planned))
+    return Plan(protocol=params.name, steps=planned, labels=list(params.labels), setup=_setup_steps(params, planned),
+                sensor=sensor)
 
 
 def _setup_steps(params, planned: list[PlannedStep]) -> int:

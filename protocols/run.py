@@ -19,7 +19,6 @@ from tqdm import tqdm
 from tactile_flow.cliapp.heap import long_lived_frozen
 from tactile_flow.hardware.errors import ConfigError
 from tactile_flow.tactile.frames import DEFAULT_VIEWS
-from tactile_flow.tactile.geometry import load_taxels
 from tactile_flow.runstore import RunStore, provenance, rundir, utc_now
 from tactile_flow.tactile import warmup
 from tactile_flow.tactile.pipeline import TactileModel
@@ -28,6 +27,7 @@ from .calibration import session_baseline, store_baseline
 from .engine import FAILED, Outcome, RunEngine
 from .interrupts import Interrupts
 from .backends import check_hardware, make_lab
+from tactile_flow.cliapp.sensors import composed_sensor
 from .live import (LiveConfig, LiveMonitor, live_fingers, live_settings, open_viewer, tactile_config, terminal_display,
                    viewer_names, warm_up)
 from .plan import Plan, format_timeline, make_plan
@@ -62,14 +62,15 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
     """
     run_dir = Path(run_dir)
     check_config(cfg)
-    plan = make_plan(cfg)
+    sensor = composed_sensor(cfg)                   # the sensor group, checked once: handed down from here
+    plan = make_plan(cfg, sensor)
     live, model = live_setup(cfg, plan, build=not cfg.plan_only, console=console)
     if cfg.plan_only:
-        check_hardware(cfg)
+        check_hardware(cfg, sensor)
         console(format_timeline(plan))
         return RunResult("planned", run_dir, plan)
 
-    lab = make_lab(cfg)
+    lab = make_lab(cfg, sensor)
     baseline = session_baseline(cfg.hardware, lab)
     own = interrupts is None
     interrupts = interrupts or Interrupts(console)
@@ -78,7 +79,7 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
         prov = provenance.collect(OmegaConf.to_yaml(cfg, resolve=True), list(overrides), lab.identities(),
                                   _calibration(lab), cfg.hardware.get("seed"), protocol=plan.protocol)
         with interrupts.during("writing"):          # from the store's creation to run.json: no signal raises
-            store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
+            store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers, sensor=sensor,
                                     run_id=prov["run_id"], provenance=provenance.summary(prov),
                                     attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
                                            "tare": bool(cfg.protocol.get("tare", True))},
@@ -179,14 +180,16 @@ def live_setup(cfg, plan: Plan, build: bool = True, console=print) -> tuple[Live
         tactile = tactile_config(cfg.get("analysis") or {}, live.views)
     except ValueError as exc:
         raise ConfigError("live", str(exc)) from None
-    known = {**DEFAULT_VIEWS, **tactile.custom_views}
+    sensor = plan.sensor
+    known = {**({v: None for v in sensor.views} if sensor is not None else DEFAULT_VIEWS), **tactile.custom_views}
     bad = [v for v in live.views if v not in known] or ([] if live.views else ["(none)"])
     if bad:
-        raise ConfigError("live.views", f"{bad}: expected one or more of {sorted(known)}")
+        whose = f" (the views of sensor {sensor.name})" if sensor is not None else ""
+        raise ConfigError("live.views", f"{bad}: expected one or more of {sorted(known)}{whose}")
     if not build:
         return live, None
-    warmup.compile_cold(tactile, console=console, groups=warmup.LIVE)
-    model = TactileModel.build(tactile)
+    warmup.compile_cold(tactile, console=console, groups=warmup.LIVE, sensor=plan.sensor)
+    model = TactileModel.build(tactile, sensor=plan.sensor)
     warm_up(model, live.views)
     return live, model
 
@@ -215,7 +218,8 @@ def _conditions(cfg, lab, baseline: dict, plan: Plan) -> dict:
 
 def _calibration(lab) -> dict:
     baselines = getattr(lab.biotac, "calibration", {}) or {}
-    return {"taxels_mm": load_taxels().tolist(),
+    sensor = lab.biotac.sensor_model
+    return {"sensor": sensor.summary(), "taxels_mm": sensor.taxels.tolist(),
             "baseline_counts": {f: [float(x) for x in v] for f, v in baselines.items()}}
 
 

@@ -11,7 +11,7 @@ kept (uint8, 1 kB per 32×32 frame), flow fields only on request.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -49,7 +49,7 @@ class TactileConfig:
             ignores how the displacement moves silhouettes (mean difference ≈ 0.05 kΩ per
             pixel at the defaults; measure with ``benchmarks/bench_pipeline.py``).
         views: names of the views to render (keys of ``custom_views`` or of
-            :data:`tactile.frames.DEFAULT_VIEWS`).
+            :data:`tactile.frames.DEFAULT_VIEWS`, or the sensor model's); empty: the sensor's.
         custom_views: extra views defined in config.
         size: frame size (H, W) [px].
         intensity_range: activation mapped to 0 and 255 [kΩ].
@@ -109,6 +109,8 @@ class TactileModel:
         if config.render not in ("exact", "linear"):
             raise ValueError(f"render: expected 'exact' or 'linear', got {config.render!r}")
         taxels, fit, mesh = cls.surface_of(config, taxels, cache_dir, sensor)
+        if not config.views:
+            config = replace(config, views=tuple(sensor.views) if sensor is not None else tuple(frames.DEFAULT_VIEWS))
         weights = surface.interpolation_weights(mesh, taxels, sigma=config.sigma, kernel=config.kernel,
                                                 geodesic=config.geodesic, cache_dir=cache_dir)
         sensor_views = {} if sensor is None else {v: frames.DEFAULT_VIEWS.get(v) or frames.View(v, **sensor.custom_views[v])
