@@ -10,6 +10,8 @@ was recorded with. A store from before (no ``sensor`` attribute) is a BioTac SP'
 
 from __future__ import annotations
 
+import dataclasses
+
 from tactile_flow.tactile.sensor import SensorModel, SensorModelError, builtin_sensor, load_sensor, sensor_for_taxels
 
 __all__ = ["recorded_sensor", "require_same_sensor"]
@@ -31,7 +33,7 @@ def recorded_sensor(attrs: dict, n_taxels: int, where: str) -> tuple[SensorModel
         if model.n_taxels != n_taxels:
             raise SensorModelError("sensor_model", f"has {model.n_taxels} taxels but the store's electrodes have "
                                                    f"{n_taxels}; the store's attributes were altered", f"{where}")
-        return model, "recorded"
+        return dataclasses.replace(model, file=summary.get("file")), "recorded"
     if n_taxels == builtin_sensor().n_taxels:
         model = builtin_sensor()
         return model, f"assumed: the store records no sensor model; {n_taxels} electrodes: {model.name}"
