@@ -37,11 +37,11 @@ import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import signals_received
 from tactile_flow.cliapp.sensors import named_sensor
 from tactile_flow.validation import ConfigError
+from tactile_flow.conf import DIR as CONF_DIR
 
 from .config import AnalysisConfigError
 from .load import AnalysisInputError
 
-CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 BAD_INPUT, FAILED, INTERRUPTED = 2, 1, 3
 MULTIRUN_FLAGS = ("-m", "--multirun")
 

@@ -33,6 +33,8 @@ from hydra.core.plugins import Plugins
 from hydra.plugins.config_source import ConfigResult
 from omegaconf import DictConfig, ListConfig, OmegaConf
 
+from .packaged import repair_hint
+
 MAX_BYTES = 1 << 20          # a config file is a few kB
 MAX_DEPTH = 48               # nested mappings/lists: 8 nested repeats of a protocol need ~30
 MAX_NODES = 100_000          # YAML nodes once aliases are expanded
@@ -195,11 +197,15 @@ class FileConfigSource(_File):
 
     def load_config(self, config_path: str) -> ConfigResult:
         full = os.path.realpath(os.path.join(self.path, self._normalize_file_name(config_path)))
-        if os.path.isfile(full):
-            with open(full, encoding="utf-8", errors="replace") as f:
-                check_text(f.read(MAX_BYTES + 1), full)
-        result = super().load_config(config_path)
-        check_result(result, config_path, full)
+        try:
+            if os.path.isfile(full):
+                with open(full, encoding="utf-8", errors="replace") as f:
+                    check_text(f.read(MAX_BYTES + 1), full)
+            result = super().load_config(config_path)
+            check_result(result, config_path, full)
+        except ConfigFileError as exc:
+            hint = repair_hint(full)             # one of the files we ship: a broken install
+            raise ConfigFileError(f"{exc}; {hint}" if hint else str(exc)) from None
         return result
 
 

@@ -1,4 +1,4 @@
-"""``--help`` / ``-h`` answered before Hydra is imported (Hydra composing the whole config
+"""``--help`` / ``-h`` (and ``--version``) answered before Hydra is imported (Hydra composing the whole config
 costs ~0.45 s): the same text as Hydra's help, read from the app's ``hydra.help.template``
 with ``$APP_CONFIG_GROUPS`` filled from the config directory's groups, as Hydra lists them."""
 
@@ -29,6 +29,13 @@ def help_text(conf_dir: Path, config_name: str) -> str:
 
 def wants_help(argv: list[str]) -> bool:
     return "--help" in argv or "-h" in argv
+
+
+def answer_version(argv: list[str], prog: str) -> None:
+    """``--version``: print the version and the commit it was built from, and exit 0."""
+    if argv == ["--version"]:
+        from tactile_flow import version_line
+        print_and_exit(version_line(prog))
 
 
 def print_and_exit(text: str) -> None:

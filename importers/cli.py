@@ -15,7 +15,6 @@ traceback. The work is :func:`importers.import_source`.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
@@ -23,12 +22,12 @@ from omegaconf import OmegaConf
 
 from tactile_flow.cliapp.runner import report, run_app
 from tactile_flow.cliapp.sensors import named_sensor
+from tactile_flow.conf import DIR as CONF_DIR
 from tactile_flow.runstore.status import ExitCode
 
 from .importer import ImportIncomplete, ImportSettings, import_source
 from .recording import ImportInputError
 
-CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 BAD_INPUT, FAILED = ExitCode.BAD_INPUT, ExitCode.FAILED
 _exit = {"code": 0}
 

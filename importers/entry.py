@@ -3,10 +3,16 @@
 
 from __future__ import annotations
 
+import sys
+
+from tactile_flow.cliapp.packaged import require
+from tactile_flow.cliapp.quick_help import answer_version
 from tactile_flow.cliapp.startup import end_at_once_on_signals
 
 
 def main() -> None:
     end_at_once_on_signals()
+    answer_version(sys.argv[1:], "tactile-import")
+    require("import")
     from .cli import main as import_
     import_()

@@ -24,13 +24,13 @@ from omegaconf import OmegaConf
 
 import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import report
+from tactile_flow.conf import DIR as CONF_DIR
 from tactile_flow.runstore import RunStatus, rundir
 
 from .interrupts import Interrupts
 from .schema import check_targets, register
 
 log = logging.getLogger("tactile-run")
-CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 EXIT_CODES = {s.value: int(s.exit_code) for s in RunStatus}
 BAD_INPUT = 2
 
@@ -69,7 +69,7 @@ def run_job(cfg, console=console, interrupts: Interrupts | None = None) -> int:
 
 
 def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
-    from . import resume                            # the run store, the simulator, numba: not for --help
+    from . import resume  # the run store, the simulator, numba: not for --help
     from .run import RunResult, hand_off, run_protocol
     try:
         check_targets(cfg)
@@ -140,7 +140,7 @@ def step_fields(kind: str) -> list[str] | None:
     error on a misspelt step key."""
     from dataclasses import fields
 
-    from .steps import STEP_KINDS                 # the step registry: imported only on an error
+    from .steps import STEP_KINDS  # the step registry: imported only on an error
     cls = STEP_KINDS.get(kind)
     return None if cls is None else [f.name for f in fields(cls) if f.name != "key"]
 

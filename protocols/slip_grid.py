@@ -18,9 +18,9 @@ import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
+from tactile_flow.conf import DIR as CONF_DIR
 from tactile_flow.hardware.sim.contact_check import PRESS_FORCES
 
-CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 DIRECTIONS_DEG = (0.0, 60.0, 120.0, 180.0, 240.0, 300.0)
 ROTATIONS_DEG = (30.0, -30.0)
 OBJECTS = ("flat", "cylinder")
@@ -67,7 +67,8 @@ def conditions(directions=DIRECTIONS_DEG, rotations=ROTATIONS_DEG, forces=tuple(
 def compose(condition: Condition, noise: float = 1.0, seed: int = 0, baseline: str | None = "simulated",
             overrides=()):
     """The run config ``tactile-run protocol=slip_in_place ...`` would compose for ``condition``."""
-    from hydra import compose as hydra_compose, initialize_config_dir
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
 
     from .schema import register
 

@@ -4,6 +4,7 @@
 ``<prog>: error: <what>; see <prog> --help`` (one line, no usage block) and exits 2, as every
 command of the project does for bad input, and that the help keeps its text as written
 (what the command does, examples, exit codes, in the ``description`` and ``epilog``).
+Every command takes ``--version``: the package's version and the commit it was built from.
 """
 
 from __future__ import annotations
@@ -20,10 +21,23 @@ class ArgumentParser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
         kwargs.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
         super().__init__(*args, **kwargs)
+        self.add_argument("--version", action=_Version, help="print the version and the commit, and exit")
 
     def error(self, message: str):
         print(f"{self.prog}: error: {message}; see {self.prog} --help", file=sys.stderr)
         sys.exit(BAD_INPUT)
+
+
+class _Version(argparse.Action):
+    """argparse's ``version`` action, with the line made only when asked (it may ask git)."""
+
+    def __init__(self, option_strings, dest, **kwargs):
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from tactile_flow import version_line
+        print(version_line(parser.prog))
+        parser.exit()
 
 
 def help_text(doc: str) -> str:

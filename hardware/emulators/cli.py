@@ -16,6 +16,8 @@ import sys
 import time
 from pathlib import Path
 
+from tactile_flow.conf import DIR as CONF_DIR
+
 HOME_POSE = (0.3, 0.0, 0.2, 3.141592653589793, 0.0, 0.0)    # hardware.arm.home_pose of conf/hardware/lab.yaml
 DEFAULT_LINK_DIR = os.environ.get("TACTILE_EMULATE_DIR", "/tmp/tactile-emulate")
 POSE_FILE = "tcp_pose"          # the arm emulator's TCP pose, read by the BioTac emulators (touch.py)
@@ -76,7 +78,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     from .process import emulated_sensor
     emulated_sensor(args.sensor, parser)                 # a bad model is refused here, not in a child
-    surfaces = sorted(p.stem for p in (Path(__file__).resolve().parents[2] / "conf" / "surface").glob("*.yaml"))
+    surfaces = sorted(p.stem for p in (CONF_DIR / "surface").glob("*.yaml"))
     if args.surface != "none" and args.surface not in surfaces:
         parser.error(f"--surface {args.surface}: expected one of {', '.join(surfaces)} or none")
 

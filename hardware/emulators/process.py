@@ -14,9 +14,6 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 class EmulatorError(RuntimeError):
@@ -44,7 +41,7 @@ class EmulatorProcess:
     def start(self) -> "EmulatorProcess":
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         self.proc = subprocess.Popen([sys.executable, "-m", self.module, *self.args], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=ROOT)
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
         threading.Thread(target=self._pump_stdout, daemon=True).start()
         line = self._expect("READY", self.ready_timeout_s)
         self.ready = dict(f.split("=", 1) for f in line.split()[1:] if "=" in f)

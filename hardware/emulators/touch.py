@@ -22,8 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile_flow.conf import DIR as CONF_DIR
+
 N_VALUES = 12
-SURFACES_DIR = Path(__file__).resolve().parents[2] / "conf" / "surface"
+SURFACES_DIR = CONF_DIR / "surface"
 
 
 class PoseFile:
@@ -72,8 +74,8 @@ class EmulatedTouch:
         from omegaconf import OmegaConf
 
         from ..config import load_config
-        from ..surfaces import load_surface
         from ..sim.world import SimWorld
+        from ..surfaces import load_surface
 
         path = SURFACES_DIR / f"{surface}.yaml"
         if not path.is_file():
