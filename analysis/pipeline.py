@@ -146,7 +146,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
     if scheme == labelling.SWEEP:
         # the 'during' plateau is measured on the width signal, so that the segment and the
         # width estimate (plateau duration x speed) describe the same stretch
-        wsig = prepared.proxy if cfg.estimates.width_signal == "proxy" else prepared.pressure
+        wsig = prepared.pad_proxy if cfg.estimates.width_signal == "proxy" else prepared.pressure
         for f in bumps:
             k = run.fingers.index(f)
             ws = seg.smooth(wsig[:, k], rate, s.smooth_s)
@@ -276,7 +276,7 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
     """One row per feature crossed: direction (sensor, world), width, height, texture angle."""
     out = []
     e = cfg.estimates
-    width_sig = prepared.proxy if e.width_signal == "proxy" else prepared.pressure
+    width_sig = prepared.pad_proxy if e.width_signal == "proxy" else prepared.pressure
     speed = None
     if run.arm_time is not None and run.tcp_speed is not None:
         speed = est.speed_mm_s(run.arm_time, run.tcp_speed, run.time)

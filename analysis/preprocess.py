@@ -142,6 +142,9 @@ class PreparedRun:
             :class:`analysis.chunking.LazyActivation`: index them by windows (``[a:b, k]``).
         pressure: (T, F) pressure above rest (``pressure_units``).
         proxy: (T, F) sum of smoothed activations, kΩ (always computed).
+        pad_proxy: (T, F) the same sum over the sensor model's pad taxels
+            (:attr:`tactile.sensor.SensorModel.pad`), the signal widths are measured on; the
+            ``proxy`` array itself when every taxel is the pad.
         causal_proxy: (T, F) sum of the forward-only Kalman-filtered raw activation, kΩ: what
             an online estimate knows at each frame (dates a slip the smoother would blur), or
             ``None`` when not asked for.
@@ -178,6 +181,11 @@ class PreparedRun:
     preparation: dict = field(default_factory=dict)
     unusable: dict = field(default_factory=dict)
     repaired: dict = field(default_factory=dict)
+    pad_proxy: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.pad_proxy is None:
+            self.pad_proxy = self.proxy
 
     @property
     def baseline_source(self) -> str:
@@ -322,6 +330,8 @@ def prepare(run: RunData, cfg, model, causal_proxy: bool = True) -> PreparedRun:
 
     # pass 1: the proxies, the residuals the noise is measured on, the envelope
     proxy = np.empty((T, F), dtype)
+    pad = run.sensor.pad if run.sensor is not None else None
+    pad_proxy = proxy if pad is None else np.empty((T, F), dtype)
     causal = np.empty((T, F), dtype) if causal_proxy else None
     stride = -(-T // cfg.memory.noise_sample_frames)
     residual = np.empty((len(range(0, T, stride)), F, N))          # ln Z − ln Z_smoothed, sampled frames
@@ -331,6 +341,8 @@ def prepare(run: RunData, cfg, model, causal_proxy: bool = True) -> PreparedRun:
         raw, clean, act = smoothed(imp, base, cfg, model)
         core = slice(a - a0, b - a0)
         proxy[a:b] = signals.pdc_proxy(act[core])
+        if pad is not None:
+            pad_proxy[a:b] = signals.pdc_proxy(act[core][..., pad])
         if causal is not None:
             causal[a:b] = signals.kalman_filter(raw, R=tc.kalman_r, Q=tc.kalman_q)[core].sum(axis=-1)
         rows = np.arange(a + (-a) % stride, b, stride)
@@ -373,6 +385,7 @@ def prepare(run: RunData, cfg, model, causal_proxy: bool = True) -> PreparedRun:
         activation = LazyActivation(lambda a0, b0, k: smoothed(read(a0, b0, k), rest_of(k), cfg, model)[2],
                                     (T, F, N), reach, cfg.memory.chunk_frames)
     return PreparedRun(raw_activation=raw_activation, activation=activation, pressure=pressure, proxy=proxy,
+                       pad_proxy=pad_proxy,
                        causal_proxy=causal, pressure_units=units, pressure_name=name, baseline=baseline,
                        rest_noise=rest_noise, noise=noise, score=score, fine_score=fine, envelope=envelope,
                        preparation={"stretches": len(parts), "chunk_frames": cfg.memory.chunk_frames,

@@ -77,7 +77,9 @@ class SurfaceSpec:
     ``given`` as ``centre_mm`` and ``axes_mm`` (semi-axes along x, y, z). ``kind`` ``plane``:
     a flat rectangle facing −z, centred at ``centre_mm`` with ``size_mm`` (x, y) — fitted: the
     taxels' mean height and their extent plus ``margin_mm`` on every side. Every taxel must lie
-    within ``tolerance_mm`` of the surface."""
+    within ``tolerance_mm`` of the surface. ``pad_radius_mm``: the taxels within this distance
+    (in x–y, mm) of the pad's lowest point are the *pad* (:attr:`SensorModel.pad`), whose summed
+    activation is the signal feature widths are measured on; ``null``: every taxel."""
     kind: str = spec("ellipsoid", choices=SURFACE_KINDS)
     fit: str = spec("positions", choices=SURFACE_FITS)
     centre_mm: list[float] | None = spec(None, length=3)
@@ -86,6 +88,7 @@ class SurfaceSpec:
     margin_mm: float = spec(2.0, ge=0)
     normal_weight: float = spec(3.0, gt=0)
     tolerance_mm: float = spec(1.0, gt=0)
+    pad_radius_mm: float | None = spec(None, gt=0)
 
 
 @dataclass
@@ -248,6 +251,15 @@ class SensorModel:
     @property
     def n_taxels(self) -> int:
         return len(self.taxels)
+
+    @property
+    def pad(self) -> np.ndarray | None:
+        """(N,) bool, the pad's taxels (within ``surface.pad_radius_mm`` of the lowest point in
+        x–y), or ``None`` when every taxel is the pad."""
+        r = self.surface.pad_radius_mm
+        if r is None:
+            return None
+        return np.linalg.norm(self.taxels[:, :2] - self.shape.pole[:2], axis=1) <= r
 
     @property
     def counts_max(self) -> int:
@@ -414,6 +426,11 @@ def load_sensor(data, *, file: str | None = None, key: str = "sensor", cache_dir
                                                            f"surface (its outward normal there is "
                                                            f"{surface_normals[k].round(3).tolist()}); expected outward "
                                                            f"normals")
+    if s.surface.pad_radius_mm is not None and not (
+            np.linalg.norm(taxels[:, :2] - shape.pole[:2], axis=1) <= s.surface.pad_radius_mm).any():
+        raise _err(file, f"{key}.surface.pad_radius_mm", f"{s.surface.pad_radius_mm:g} mm holds no taxel; expected "
+                                                         f"a radius about the lowest point {shape.pole.round(2).tolist()} "
+                                                         f"that holds the pad's taxels")
     content = canonical(s)
     taxels.setflags(write=False)
     normals = given_normals if given_normals is not None else surface_normals
