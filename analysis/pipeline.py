@@ -361,9 +361,9 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
             if parts:
                 curl = np.mean([p.curl for p in parts], axis=0) / 2.0
                 rot[cf.window[0]:cf.window[1]] = seg.smooth(curl, rate, 0.5)
-        p = seg.smooth(prepared.proxy[:, k], rate, 0.5)
+        p = seg.smooth(prepared.pad_proxy[:, k], rate, 0.5)
         if reaction is None:
-            fast = seg.smooth(prepared.proxy[:, k], rate, cfg.segmentation.smooth_s)
+            fast = seg.smooth(prepared.pad_proxy[:, k], rate, cfg.segmentation.smooth_s)
         else:
             # the grasp tightened right after the slip: a smoothed pressure would carry that rise
             # back over the slip's fall, so the slip is dated on the causal (filter-only) proxy

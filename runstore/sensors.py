@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from tactile_flow.tactile.sensor import SensorModel, SensorModelError, builtin_sensor, load_sensor, sensor_for_taxels
+from tactile_flow.tactile.sensor import (SensorModel, SensorModelError, builtin_sensor, checksum, load_sensor,
+                                         sensor_for_taxels)
 
 __all__ = ["recorded_sensor", "require_same_sensor"]
 
@@ -25,11 +26,17 @@ def recorded_sensor(attrs: dict, n_taxels: int, where: str) -> tuple[SensorModel
     have the store's electrode count."""
     summary, spec = attrs.get("sensor"), attrs.get("sensor_model")
     if isinstance(summary, dict) and isinstance(spec, dict):
-        model = load_sensor(spec, file=f"{where} (attribute sensor_model)")
-        if model.sha256 != summary.get("sha256"):
-            raise SensorModelError("sensor_model", f"checksum {model.sha256[:8]} is not the recorded "
+        try:
+            stored = checksum(spec)
+        except (TypeError, ValueError):
+            stored = None
+        if stored != summary.get("sha256"):
+            raise SensorModelError("sensor_model", f"checksum {str(stored)[:8]} is not the recorded "
                                                    f"{str(summary.get('sha256'))[:8]}; the store's attributes "
                                                    f"were altered", f"{where}")
+        # read with today's schema: a field added since takes its default, and the model's
+        # checksum is then that of today's form (what a model asked for is compared with)
+        model = load_sensor(spec, file=f"{where} (attribute sensor_model)")
         if model.n_taxels != n_taxels:
             raise SensorModelError("sensor_model", f"has {model.n_taxels} taxels but the store's electrodes have "
                                                    f"{n_taxels}; the store's attributes were altered", f"{where}")
