@@ -185,6 +185,8 @@ def load_config(node=None) -> AnalysisConfig:
     intensity = "contact" if tac.get("intensity_range", "contact") == "contact" else "fixed"
     if intensity == "contact":
         tac.pop("intensity_range", None)
+    if "size" in tac and tac["size"] is None:                  # null: the sensor model's frame size (for_sensor)
+        tac.pop("size")
     _refuse_unknown("analysis.tactile", tac, _TACTILE_KEYS)
     fl = dict(d.get("flow") or {})
     reference = _typed("flow.reference", fl.pop("reference", "auto"), str)
@@ -271,9 +273,13 @@ def load_config(node=None) -> AnalysisConfig:
 
 def for_sensor(cfg: AnalysisConfig, sensor) -> AnalysisConfig:
     """``cfg`` for the sensor model ``sensor`` (:class:`tactile.sensor.SensorModel`): with no
-    ``analysis.views`` given, the sensor's views; views it does not have (nor
+    ``analysis.views`` given, the sensor's views, and with no ``analysis.tactile.size``, its
+    ``frame_size`` (when it gives one); views it does not have (nor
     ``tactile.custom_views``) are an :class:`AnalysisConfigError` naming them, as are slip
     evidence views outside the analysed ones (a flat pad has only ``bottom``)."""
+    tactile = cfg.tactile
+    if sensor.frame_size is not None and (cfg.raw.get("tactile") or {}).get("size") is None:
+        tactile = dataclasses.replace(tactile, size=tuple(sensor.frame_size))
     known = (*sensor.views, *cfg.tactile.custom_views)
     views = tuple(cfg.views) or tuple(sensor.views)
     bad = [v for v in views if v not in known]
@@ -287,7 +293,7 @@ def for_sensor(cfg: AnalysisConfig, sensor) -> AnalysisConfig:
     if "views" in (cfg.raw.get("slip") or {}) and slip_views != tuple(cfg.slip.views):
         raise AnalysisConfigError("analysis.slip.views", f"{list(cfg.slip.views)}: expected some of the analysed "
                                                          f"views {list(views)}")
-    return dataclasses.replace(cfg, views=views, tactile=dataclasses.replace(cfg.tactile, views=views),
+    return dataclasses.replace(cfg, views=views, tactile=dataclasses.replace(tactile, views=views),
                                slip=dataclasses.replace(cfg.slip, views=slip_views))
 
 

@@ -131,6 +131,8 @@ def tactile_config(analysis: dict, views) -> TactileConfig:
     tk = dict(analysis.get("tactile") or {})
     if isinstance(tk.get("intensity_range"), str):
         tk.pop("intensity_range")
+    if "size" in tk and tk["size"] is None:                    # the sensor model's (protocols.run.live_setup)
+        tk.pop("size")
     flow_keys = {f.name for f in fields(FlowConfig)} - {"dis", "tvl1"}       # not the offline-only keys
     fk = {k: v for k, v in dict(analysis.get("flow") or {}).items() if k in flow_keys}
     known = {f.name for f in fields(TactileConfig)}

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 from contextlib import nullcontext
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib.metadata import entry_points
 from pathlib import Path
 
@@ -159,6 +159,7 @@ def live_setup(cfg, plan: Plan, build: bool = True, console=print) -> tuple[Live
         live = live_settings(cfg)
     except (ValueError, TypeError) as exc:
         raise ConfigError("live", str(exc)) from None
+    live = for_sensor_slip(live, plan.sensor)
     reacting = plan.slip_steps()
     if not cfg.protocol.get("tare", True) and (live.enabled or reacting):
         what = f"{reacting[0]} reacts to slip" if reacting else "live.enabled=true"
@@ -181,6 +182,9 @@ def live_setup(cfg, plan: Plan, build: bool = True, console=print) -> tuple[Live
     except ValueError as exc:
         raise ConfigError("live", str(exc)) from None
     sensor = plan.sensor
+    if sensor is not None and sensor.frame_size is not None and \
+            ((cfg.get("analysis") or {}).get("tactile") or {}).get("size") is None:
+        tactile = replace(tactile, size=tuple(sensor.frame_size))     # the frames the sensor's footprint asks for
     known = {**({v: None for v in sensor.views} if sensor is not None else DEFAULT_VIEWS), **tactile.custom_views}
     bad = [v for v in live.views if v not in known] or ([] if live.views else ["(none)"])
     if bad:
@@ -252,3 +256,15 @@ class ProgressConsole:
         if self.status is not None:
             self.status.close()
             self.status = None
+
+
+def for_sensor_slip(live: LiveConfig, sensor) -> LiveConfig:
+    """``live`` with the slip thresholds the sensor model asks for (its ``live_slip``) where the
+    run keeps the default (a threshold set to another value on the command line or in a
+    protocol is the run's)."""
+    from tactile_flow.tactile.slip import SlipConfig
+    if sensor is None or not sensor.live_slip:
+        return live
+    default = SlipConfig()
+    changes = {k: v for k, v in sensor.live_slip.items() if getattr(live.slip, k) == getattr(default, k)}
+    return replace(live, slip=replace(live.slip, **changes)) if changes else live

@@ -159,6 +159,7 @@ class SensorSpec:
     surface: SurfaceSpec = field(default_factory=SurfaceSpec)
     views: list[str] = spec(factory=lambda: ["bottom", "left", "right"])
     custom_views: dict[str, ViewSpec] = field(default_factory=dict)
+    frame_size: list[int] | None = spec(None, length=2)        # (H, W) px of the frames; null: the analysis's
     electrodes: ElectrodeSpec = field(default_factory=ElectrodeSpec)
     pressure: ChannelSpec | None = None
     vibration: ChannelSpec | None = None
@@ -166,6 +167,7 @@ class SensorSpec:
     temperature_change: ChannelSpec | None = None
     limits: LimitsSpec = field(default_factory=LimitsSpec)
     simulation: SimulationSpec = field(default_factory=SimulationSpec)
+    live_slip: dict[str, float] = field(default_factory=dict)    # the live slip detector's thresholds for it
 
 
 #: keys a sensor file must set (the others have the defaults above)
@@ -219,9 +221,12 @@ class SensorModel:
             ``normals_source``).
         surface: the surface's description (:class:`SurfaceSpec`); the fitted or given
             shape is :attr:`shape` (:class:`SurfaceShape`).
-        views: names of the views rendered; ``custom_views``: name → ``tactile.frames.View`` kwargs.
+        views: names of the views rendered; ``custom_views``: name → ``tactile.frames.View`` kwargs;
+            ``frame_size``: (H, W) px of the rendered frames, or ``None`` (the analysis's ``tactile.size``).
         electrodes, pressure, vibration, temperature, temperature_change, limits, simulation:
             the file's sections (``None``: the sensor has no such channel).
+        live_slip: thresholds of the live slip detector (:class:`tactile.slip.SlipConfig`) this
+            sensor's signals need, where the run's ``live.slip`` keeps the default.
         spec: the canonical content (plain JSON types), what :attr:`sha256` is the checksum of.
         file: the file it came from (``None`` for a model given as data).
     """
@@ -237,6 +242,7 @@ class SensorModel:
     shape: SurfaceShape
     views: tuple[str, ...]
     custom_views: dict
+    frame_size: tuple[int, int] | None
     electrodes: ElectrodeSpec
     pressure: ChannelSpec | None
     vibration: ChannelSpec | None
@@ -244,6 +250,7 @@ class SensorModel:
     temperature_change: ChannelSpec | None
     limits: LimitsSpec
     simulation: SimulationSpec
+    live_slip: dict
     spec: dict = field(repr=False)
     sha256: str = ""
     file: str | None = None
@@ -405,11 +412,22 @@ def load_sensor(data, *, file: str | None = None, key: str = "sensor", cache_dir
                                                            f"expected a direction (normalised on reading)")
         given_normals = given_normals / length[:, None]
     views, custom = _views(s, file, key)
+    if s.frame_size is not None and min(s.frame_size) < 8:
+        raise _err(file, f"{key}.frame_size", f"got {s.frame_size}; expected [H, W] of at least 8 x 8 px")
     lo, hi = s.limits.electrode_counts
     if not 0 <= lo < hi <= s.electrodes.counts_max:
         raise _err(file, f"{key}.limits.electrode_counts", f"got {[lo, hi]}; expected [low, high] with "
                                                            f"0 <= low < high <= electrodes.counts_max "
                                                            f"({s.electrodes.counts_max})")
+    from .slip import SlipConfig
+    known = {f.name for f in dataclasses.fields(SlipConfig)}
+    for k, v in s.live_slip.items():
+        if k not in known:
+            from tactile_flow.validation import unknown_key
+            exc = unknown_key(f"{key}.live_slip", k, known, "threshold")
+            raise _err(file, exc.key, exc.message)
+        if not v > 0:
+            raise _err(file, f"{key}.live_slip.{k}", f"got {v!r}; expected a number > 0")
     names_used = [c.name for role in CHANNEL_ROLES if (c := getattr(s, role)) is not None]
     for role in CHANNEL_ROLES:
         c = getattr(s, role)
@@ -437,9 +455,11 @@ def load_sensor(data, *, file: str | None = None, key: str = "sensor", cache_dir
     normals.setflags(write=False)
     return SensorModel(name=s.name, description=s.description, source=s.source, taxel_names=names,
                        taxels=taxels, normals=normals, normals_source="file" if given_normals is not None else "surface",
-                       surface=s.surface, shape=shape, views=views, custom_views=custom, electrodes=s.electrodes,
+                       surface=s.surface, shape=shape, views=views, custom_views=custom,
+                       frame_size=tuple(s.frame_size) if s.frame_size is not None else None, electrodes=s.electrodes,
                        pressure=s.pressure, vibration=s.vibration, temperature=s.temperature,
                        temperature_change=s.temperature_change, limits=s.limits, simulation=s.simulation,
+                       live_slip=dict(s.live_slip),
                        spec=content, sha256=checksum(content), file=str(file) if file else None)
 
 
