@@ -1,14 +1,15 @@
 """Accuracy of the slip estimate on simulated slip-in-place runs, per evidence source, and the
 real grasp frames' contact detection rate.
 
-    python benchmarks/bench_slip_direction.py [--out DIR] [--noise 0.5 1 2] [--quick]
+    python benchmarks/bench_slip_direction.py [--out DIR] [--noise 0.5 1 2] [--quick] [--sensor biotac_sp biotac]
 
 Runs (or reuses, in ``--out``) the slip-in-place grid of ``conf/experiment/slip_in_place_grid.yaml``
 (6 directions × 2 rotations × touch × 2 forces × 2 objects × with/without tare) at each noise
-level (``hardware.sensor.noise_scale`` and the object's tremor scaled together), analyses every
-run with ``tactile-analyze``'s defaults and scores it against the simulator's truth. Prints one
-JSON line per (noise, force, object, tare) cell and evidence source, then the totals, then a
-markdown table (docs/analysis.md). Sources:
+level (``hardware.sensor.noise_scale`` and the object's tremor scaled together) for each sensor
+model (``sensor=``: by default the BioTac SP and the classic BioTac), analyses every run with
+``tactile-analyze``'s defaults and scores it against the simulator's truth. Prints one JSON line
+per (sensor, noise, force, object, tare) cell and evidence source, then the totals per sensor,
+then a markdown table per sensor (docs/analysis.md, docs/sensors.md). Sources:
 
 - ``static_unloaded`` (negated: docs/analysis.md), ``static_onset``, ``dynamic``,
   ``cop_unloaded``, ``cop_onset``: each alone — direction of translations within 45°, rotation
@@ -40,28 +41,30 @@ def angle_error(a, b) -> float:
     return abs((a - b + 180.0) % 360.0 - 180.0)
 
 
-def runs(out: Path, noise: float, quick: bool):
-    """Yield (condition, store) for every grid run at ``noise``, running the missing ones."""
+def runs(out: Path, noise: float, quick: bool, sensor: str = "biotac_sp"):
+    """Yield (condition, store) for every grid run at ``noise`` with the sensor model ``sensor``,
+    running the missing ones."""
     from tactile_flow.protocols.slip_grid import conditions, run_slip_in_place
     conds = conditions()
     if quick:
         conds = [c for c in conds if c.surface == "flat" and c.press_force == conds[0].press_force]
     for c in conds:
-        d = out / f"noise{noise:g}" / c.name
+        d = out / sensor / f"noise{noise:g}" / c.name
         if not (d / "run.zarr").exists():
-            r = run_slip_in_place(d, c, noise=noise)
+            r = run_slip_in_place(d, c, noise=noise, overrides=[f"sensor={sensor}"])
             if r.status != "success":
                 print(json.dumps({"run": c.name, "status": r.status, "error": r.error}), file=sys.stderr)
                 continue
         yield c, d / "run.zarr"
 
 
-def evaluate(store: Path, model, cfg):
-    """(truth row, slip estimate of the matched contact segment, score row) of one run."""
+def evaluate(store: Path, cfg):
+    """(truth row, slip estimate of the matched contact segment) of one run, analysed with the
+    sensor model it was recorded with."""
     from tactile_flow.analysis.load import load_run, open_truth
     from tactile_flow.analysis.pipeline import analyse
     from tactile_flow.analysis.score import score
-    a = analyse(load_run(store), cfg, model)
+    a = analyse(load_run(store), cfg)
     sc = score(a, open_truth(store))
     row = sc.get("object_motions", [{}])[0]
     est = a.slips.get(row.get("segment"))
@@ -157,35 +160,40 @@ def main(argv=None) -> None:
     ap.add_argument("--out", type=Path, default=Path(os.environ.get("TMPDIR", "/tmp")) / "bench_slip_direction")
     ap.add_argument("--noise", type=float, nargs="+", default=[1.0])
     ap.add_argument("--quick", action="store_true", help="flat object and light force only")
+    ap.add_argument("--sensor", nargs="+", default=["biotac_sp", "biotac"],
+                    help="sensor models (conf/sensor/): the BioTac SP and the classic BioTac by default")
     args = ap.parse_args(argv)
     from tactile_flow.analysis.config import load_config
-    from tactile_flow.analysis.pipeline import get_model
     cfg = load_config({"figures": False, "progress": False})
-    model = get_model(cfg.tactile)
-    t0 = time.perf_counter()
-    everything = []
-    for noise in args.noise:
-        cells = defaultdict(list)
-        for c, store in runs(args.out, noise, args.quick):
-            tr, est = evaluate(store, model, cfg)
-            cells[(c.press_force, c.surface, c.tare)].append((c, tr, est))
-            everything.append((noise, c, tr, est))
-        for (force, surface, tare), rows in sorted(cells.items()):
-            print(json.dumps({"noise": noise, "force_n": force, "object": surface, "tare": tare, **summarise(rows)}))
-    total = summarise([(c, tr, est) for _, c, tr, est in everything])
-    print(json.dumps({"all": True, **total, "seconds": round(time.perf_counter() - t0, 1)}))
-    for tare in (True, False):
-        print(json.dumps({"tare": tare, **summarise([(c, tr, e) for _, c, tr, e in everything if c.tare == tare])}))
-    print(json.dumps({"real_contact_detection": real_contact_rate()}))
-    print("\n| source | direction (≤45°) | rotation sense | touch vs slip |\n| --- | --- | --- | --- |")
+    totals = {}
+    for sensor in args.sensor:
+        t0 = time.perf_counter()
+        everything = []
+        for noise in args.noise:
+            cells = defaultdict(list)
+            for c, store in runs(args.out, noise, args.quick, sensor):
+                tr, est = evaluate(store, cfg)
+                cells[(c.press_force, c.surface, c.tare)].append((c, tr, est))
+                everything.append((noise, c, tr, est))
+            for (force, surface, tare), rows in sorted(cells.items()):
+                print(json.dumps({"sensor": sensor, "noise": noise, "force_n": force, "object": surface, "tare": tare,
+                                  **summarise(rows)}))
+        totals[sensor] = total = summarise([(c, tr, est) for _, c, tr, est in everything])
+        print(json.dumps({"sensor": sensor, "all": True, **total, "seconds": round(time.perf_counter() - t0, 1)}))
+        for tare in (True, False):
+            print(json.dumps({"sensor": sensor, "tare": tare,
+                              **summarise([(c, tr, e) for _, c, tr, e in everything if c.tare == tare])}))
+    print(json.dumps({"sensor": "biotac_sp", "real_contact_detection": real_contact_rate()}))
     fmt = lambda v: "–" if v is None else f"{100 * v:.0f} %"  # noqa: E731
-    for source in SOURCES:
-        r = total[source]
-        print(f"| {source} | {fmt(r['direction'])} | {fmt(r['rotation_sense'])} | "
-              f"{fmt(r['touch_vs_slip_best_threshold'])} (best threshold) |")
-    r = total["combined"]
-    print(f"| combined (shipped) | {fmt(r.get('direction'))} | {fmt(r.get('rotation_sense'))} | "
-          f"{fmt(r.get('touch_vs_slip'))} |")
+    for sensor, total in totals.items():
+        print(f"\n{sensor}:\n\n| source | direction (≤45°) | rotation sense | touch vs slip |\n| --- | --- | --- | --- |")
+        for source in SOURCES:
+            r = total[source]
+            print(f"| {source} | {fmt(r['direction'])} | {fmt(r['rotation_sense'])} | "
+                  f"{fmt(r['touch_vs_slip_best_threshold'])} (best threshold) |")
+        r = total["combined"]
+        print(f"| combined (shipped) | {fmt(r.get('direction'))} | {fmt(r.get('rotation_sense'))} | "
+              f"{fmt(r.get('touch_vs_slip'))} |")
 
 
 if __name__ == "__main__":

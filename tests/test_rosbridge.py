@@ -144,3 +144,19 @@ def test_bad_rosbridge_config_names_the_key():
         RosbridgeConfig(connect_timeout_s=0)
     with pytest.raises(ConfigError, match=r"hardware.biotac.fingers\[0\]"):
         RosbridgeBiotacConfig(fingers=("index",))
+
+
+def test_classic_biotacs_send_19_electrodes_and_a_mismatched_model_is_named():
+    from tactile_flow.tactile.sensor import builtin_sensor
+    with RosbridgeEmulator(seed=5, unconnected=("rf", "lf"), sensor="biotac") as e:
+        cfg = RosbridgeBiotacConfig(RosbridgeConfig(e.url), fingers=("ff", "mf", "th"))
+        with RosbridgeBiotacs(cfg, sensor=builtin_sensor("biotac")) as bt:
+            time.sleep(0.3)
+            f = bt.read()[-1]
+            assert f.electrodes.shape == (3, 19) and f.is_valid() and bt.unconnected == {"rf", "lf"}
+            assert "biotac via Shadow driver" in bt.identity.model
+        bt = RosbridgeBiotacs(RosbridgeBiotacConfig(RosbridgeConfig(e.url), fingers=("ff",),
+                                                    first_frame_timeout_s=0.5))     # the SP's model, by default
+        with pytest.raises(DeviceFaultError, match=r"/rh/tactile sends 19 electrodes per sensor; the sensor model "
+                                                   r"biotac_sp has 24"):
+            bt.connect()
