@@ -35,7 +35,7 @@ from hydra.types import RunMode
 
 import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import signals_received
-from tactile_flow.cliapp.sensors import named_sensor
+from tactile_flow.cliapp.sensors import composed_sensor
 from tactile_flow.validation import ConfigError
 from tactile_flow.conf import DIR as CONF_DIR
 
@@ -178,7 +178,7 @@ def _app(cfg) -> None:
         return
     sweep = HydraConfig.get().mode == RunMode.MULTIRUN          # the sweep's table, not one per job
     try:
-        sensor = named_sensor(cfg.get("sensor"))
+        sensor = composed_sensor(cfg, default=None)
     except ConfigError as exc:
         _report(exc, "error", bool(cfg.get("verbose")))
         jobresults.record(BAD_INPUT)

@@ -54,12 +54,14 @@ def chosen_file(group: str) -> str | None:
     return str(path) if path else None
 
 
-def composed_sensor(cfg, key: str = "sensor") -> SensorModel:
+def composed_sensor(cfg, key: str = "sensor", default: str | None = "biotac_sp") -> SensorModel | None:
     """The :class:`SensorModel` of a composed config's ``sensor`` group (its file named from
-    Hydra's choice); the BioTac SP's when the config has none."""
+    Hydra's choice); when the config has none, the built-in ``default`` (``None``: none)."""
     node = cfg.get(key) if hasattr(cfg, "get") else None
     if node is None:
-        return builtin_sensor()
+        return builtin_sensor(default) if default else None
+    if isinstance(node, str):                        # a name or a file given as a plain value
+        return named_sensor(node, key)
     return load_sensor(node, file=chosen_file(key), key=key)
 
 

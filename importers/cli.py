@@ -21,7 +21,7 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import OmegaConf
 
 from tactile_flow.cliapp.runner import report, run_app
-from tactile_flow.cliapp.sensors import named_sensor
+from tactile_flow.cliapp.sensors import composed_sensor
 from tactile_flow.conf import DIR as CONF_DIR
 from tactile_flow.runstore.status import ExitCode
 
@@ -46,7 +46,7 @@ def settings_from(cfg) -> ImportSettings:
                           topic=str(cfg.get("topic", "/rh/tactile")),
                           estimate_early_s=float(est.get("early_s", 1.0)),
                           estimate_percentile=float(est.get("percentile", 95.0)),
-                          sensor=named_sensor(cfg.get("sensor")), columns=columns,
+                          sensor=composed_sensor(cfg, default=None), columns=columns,
                           time_unit=str(cfg.get("time_unit", "auto")), relative=relative,
                           relative_rest_counts=cfg.get("relative_rest_counts", 2500.0))
 
