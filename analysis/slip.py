@@ -17,7 +17,8 @@ Evidence (each in the sensor's x–y plane, mm, and about the pad normal, deg):
   frames after it: how far the pattern moved since;
 - ``dynamic``: the frame-to-frame flow summed over the segment: the net motion during it;
 - ``cop_unloaded``: the centre of pressure (activation-weighted taxel position) relative to
-  the taxel centroid (the sensor's middle), mean over the segment — no flow at all;
+  where the taxels put an object resting on the pad (a press at the sensor model's lowest point,
+  :func:`tactile.aggregate.press_centre`), mean over the segment — no flow at all;
 - ``cop_onset``: the centre of pressure relative to its position at the reference frame.
 
 Rotation (deg, + = counter-clockwise seen from outside the pad, i.e. about −z of the sensor
@@ -144,7 +145,9 @@ def estimate(cf, activation, start: int, stop: int, model, cfg) -> dict | None:
     evidence["dynamic"] = {**_vec(dyn if dyn is not None else [np.nan] * 2), "rotation_deg": dyn_rot}
     cop, _ = tagg.centre_of_pressure(activation[start:stop], model.taxels)
     good = np.all(np.isfinite(cop), axis=1)
-    centroid = model.taxels.mean(axis=0)
+    # where the taxels put an object resting on the pad: a press at the sensor model's lowest point
+    centroid = (model.taxels.mean(axis=0) if model.sensor is None
+                else tagg.press_centre(model.taxels, model.sensor.shape.pole))
     cop_u = cop[good].mean(axis=0) - centroid if good.any() else np.full(3, np.nan)
     evidence["cop_unloaded"] = _vec(cop_u)
     cop_o = np.full(3, np.nan)

@@ -152,3 +152,50 @@ def test_views_outside_the_sensors_are_refused(cache_dir):
     model = TactileModel.build(TactileConfig(views=("bottom",)), cache_dir=cache_dir, sensor=flat)
     assert model.fit is None and model.mesh.kind == "plane" and model.plans["bottom"].mask.mean() > 0.3
     assert set(frames.DEFAULT_VIEWS) >= set(builtin_sensor("biotac").views)
+
+
+@pytest.mark.parametrize("mutate, expected", [
+    (lambda d: d["surface"].__setitem__("pad_radius_mm", 0.5), "sensor.surface.pad_radius_mm: 0.5 mm holds no taxel"),
+    (lambda d: d.__setitem__("frame_size", [4, 40]), "sensor.frame_size: got [4, 40]; expected [H, W] of at least 8"),
+    (lambda d: d.__setitem__("live_slip", {"curl_mni": 0.002}), "sensor.live_slip.curl_mni: unknown threshold; "),
+])
+def test_the_pad_frames_and_live_thresholds_are_checked_too(tmp_path, mutate, expected):
+    assert bad(tmp_path, mutate).startswith(expected)
+
+
+def test_the_analysis_takes_the_sensors_views_frames_and_pad_unless_told():
+    from tactile_flow.analysis.config import AnalysisConfigError, for_sensor, load_config
+    bt, sp, flat = builtin_sensor("biotac"), builtin_sensor("biotac_sp"), load_sensor_file(FLAT)
+    cfg = for_sensor(load_config(None), bt)
+    assert cfg.views == ("bottom", "left", "right") and cfg.tactile.size == (24, 48)
+    assert for_sensor(load_config(None), sp).tactile.size == (28, 40)
+    assert for_sensor(load_config({"tactile": {"size": [20, 30]}}), bt).tactile.size == (20, 30)
+    assert for_sensor(load_config(None), flat).views == ("bottom",)
+    with pytest.raises(AnalysisConfigError, match=r"analysis.views: \['left'\] not a view of sensor flat_pad"):
+        for_sensor(load_config({"views": ["bottom", "left"]}), flat)
+    assert bt.pad.sum() == 9 and sp.pad is None                       # the SP: every taxel
+    assert [bt.taxel_names[i] for i in np.flatnonzero(bt.pad)] == ["E3", "E4", "E5", "E13", "E14", "E15", "E17",
+                                                                    "E18", "E19"]
+
+
+def test_the_live_slip_test_takes_the_sensors_thresholds_where_the_run_keeps_the_default():
+    from tactile_flow.protocols.live import LiveConfig
+    from tactile_flow.protocols.run import for_sensor_slip
+    from tactile_flow.tactile.slip import SlipConfig
+    live = for_sensor_slip(LiveConfig(), builtin_sensor("biotac"))
+    assert live.slip.curl_min == 0.002 and for_sensor_slip(LiveConfig(), builtin_sensor("biotac_sp")).slip.curl_min == 0.001
+    own = LiveConfig(slip=SlipConfig(curl_min=0.003))
+    assert for_sensor_slip(own, builtin_sensor("biotac")).slip.curl_min == 0.003
+
+
+@pytest.mark.parametrize("name", SENSORS)
+def test_an_object_resting_on_the_pad_is_where_its_press_centre_is(name):
+    """The reference of the slip estimate's unloaded centre of pressure: a press at the pad's
+    lowest point, not the taxels' centroid (3.2 mm apart on the classic BioTac)."""
+    from tactile_flow.tactile import aggregate, synthetic
+    s = builtin_sensor(name)
+    pole = np.asarray(s.shape.pole) * [1, 1, 0]
+    act = synthetic.moving_bump(s.taxels, start=pole, velocity=(0, 0, 0), duration=0.1)
+    cop, _ = aggregate.centre_of_pressure(act, s.taxels)
+    np.testing.assert_allclose(cop[0], aggregate.press_centre(s.taxels, s.shape.pole), atol=1e-9)
+    assert abs(aggregate.press_centre(s.taxels, s.shape.pole)[0] - s.shape.pole[0]) < 0.6
