@@ -583,7 +583,7 @@ def load_sensor_file(path, *, key: str = "sensor", cache_dir=None) -> SensorMode
     except OSError as exc:
         raise _err(str(path), key, f"cannot be read ({type(exc).__name__}); expected a sensor file") from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))   # libyaml's when built in
     except yaml.YAMLError as exc:
         raise _err(str(path), key, f"not valid YAML ({str(exc).splitlines()[0]})") from None
     return load_sensor(data, file=str(path), key=key, cache_dir=cache_dir)
