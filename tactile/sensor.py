@@ -308,9 +308,6 @@ class SensorModel:
         """``biotac_sp (24 taxels, sha256 1a2b3c4d)``: the model in one phrase, for messages."""
         return f"{self.name} ({self.n_taxels} taxels, sha256 {self.sha256[:8]})"
 
-    def same_geometry(self, other: "SensorModel") -> bool:
-        return self.sha256 == other.sha256
-
 
 def _err(file, key, message) -> SensorModelError:
     return SensorModelError(key, message, file)
