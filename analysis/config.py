@@ -68,7 +68,13 @@ class Contact:
 @dataclass(frozen=True)
 class Slip:
     min_displacement_mm: float = spec(1.5, ge=0)
-    min_rotation_deg: float = spec(0.75, ge=0)
+    min_rotation_deg: float = spec(0.9, ge=0)
+    moving_confidence: float = spec(0.1, ge=0, le=1)
+    arc_ratio: float = spec(0.04, ge=0)
+    reference_s: float = spec(0.1, gt=0)
+    reference_horizon_s: float = spec(1.0, gt=0)
+    loaded_fraction: float = spec(0.5, ge=0, lt=1)
+    min_decision_s: float = spec(0.3, ge=0)
     views: tuple = ("bottom",)
 
 

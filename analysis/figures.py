@@ -308,22 +308,24 @@ def _axis(v) -> str:
     return ("+" if v[i] > 0 else "−") + names[i]
 
 
-def _summary_line(segments, rows) -> str:
-    """Every segment of a label in the bottom view: each one's aggregated |flow| and image
-    direction (up to four), or their range and circular mean (more)."""
+def _summary_line(segments, rows, mm_s_per_px: float) -> str:
+    """Every segment of a label in the bottom view: each one's aggregated |flow| (px/frame: the
+    aggregates' mm/s divided by ``mm_s_per_px``, the bottom view's pixel size × the rate) and
+    image direction (up to four), or their range and circular mean (more)."""
     aggs = [(sg, (rows.get(sg.id) or {}).get("flows", {}).get(("bottom", "dynamic"))) for sg in segments]
     found = [g for _, g in aggs if g is not None]
     head = f"Bottom view, the finger's {len(segments)} segment(s) of this label (image angle): "
     if len(segments) <= 4:
         return head + "; ".join(
             f"s{sg.id}" + (f" f{sg.feature}" if sg.feature >= 0 else "") + ": "
-            + (f"{g['magnitude']:.2f} mm/s at {np.degrees(g['direction']) % 360:.0f}°" if g else "–")
+            + (f"{g['magnitude'] / mm_s_per_px:.3f} px/frame at {np.degrees(g['direction']) % 360:.0f}°" if g else "–")
             for sg, g in aggs)
     if not found:
         return head + "no flow"
-    mags = [g["magnitude"] for g in found]
+    mags = [g["magnitude"] / mm_s_per_px for g in found]
     angle = np.degrees(np.angle(np.mean([np.exp(1j * g["direction"]) for g in found]))) % 360
-    return head + f"|flow| {min(mags):.2f}–{max(mags):.2f} mm/s (median {np.median(mags):.2f}), mean direction {angle:.0f}°"
+    return head + (f"|flow| {min(mags):.3f}–{max(mags):.3f} px/frame (median {np.median(mags):.3f}), "
+                   f"mean direction {angle:.0f}°")
 
 
 def _outline(mask: np.ndarray) -> np.ndarray:
@@ -380,6 +382,7 @@ def flow_label(a, model, label: str, panels, rows: dict):
                    for sg, *_ in picked for (v, kind), agg in (rows.get(sg.id) or {}).get("flows", {}).items()
                    if kind == "dynamic"] + [1e-6])
     scale = biggest / (0.25 * min(h_px, w_px))               # px/frame per drawn px
+    bottom_mm_s_per_px = model.plans["bottom"].mm_per_px * rate if "bottom" in model.plans else float("nan")
     # Fixed layout in inches: a heading per view (its axes), then per row a title, the frame and
     # the summary line. Every panel is drawn on one axes spanning the figure, in frame pixels
     # (one axes per panel made matplotlib's own overhead most of the figure's cost).
@@ -424,7 +427,7 @@ def flow_label(a, model, label: str, panels, rows: dict):
             title = sg.finger
             if agg is not None:
                 px = agg["magnitude"] / (plan.mm_per_px * rate)       # px/frame
-                title += f": {agg['magnitude']:.2f} mm/s, conf {agg['confidence']:.2f}"
+                title += f": {px:.3f} px/frame, conf {agg['confidence']:.2f}"
                 if px >= noise and agg["confidence"] > 0:
                     vec = np.array([np.cos(agg["direction"]), np.sin(agg["direction"])]) * px / scale
                     mid = np.array([c0 + w_px / 2, r0 + h_px / 2])
@@ -435,7 +438,8 @@ def flow_label(a, model, label: str, panels, rows: dict):
             ax.text(c0 + w_px / 2 - 0.5, r0 - 0.5 - 0.08 / px_in, title, fontsize=8, ha="center", va="bottom")
         t0, t1 = a.run.time[sg.start], a.run.time[min(sg.stop, len(a.run.time) - 1)]
         fig.text(0.1 / W, (H - top_in - row_in * (r + 1) + 0.12) / H,
-                 f"{sg.finger} segment {sg.id}, {t0:.2f}–{t1:.2f} s. " + _summary_line(by_finger[sg.finger], rows),
+                 f"{sg.finger} segment {sg.id}, {t0:.2f}–{t1:.2f} s. " + _summary_line(by_finger[sg.finger], rows,
+                                                                                   bottom_mm_s_per_px),
                  fontsize=7, va="bottom")
     ax.imshow(canvas, cmap="gray", vmin=0, vmax=255, interpolation="nearest", aspect="auto",
               extent=(-0.5, canvas.shape[1] - 0.5, canvas.shape[0] - 0.5, -0.5))
@@ -445,8 +449,7 @@ def flow_label(a, model, label: str, panels, rows: dict):
     if quiver:
         x, y, u, v = (np.concatenate(c) for c in zip(*quiver))
         ax.quiver(x, y, u, v, color="C1", angles="xy", scale_units="xy", scale=scale, width=0.0016, zorder=3)
-    mm_s = biggest * model.plans[views[0]].mm_per_px * rate
-    fig.suptitle(f"'{label}' segments; arrows to scale: a quarter of a frame is {mm_s:.2f} mm/s.\n" + FLOW_KEY,
+    fig.suptitle(f"'{label}' segments; arrows to scale: a quarter of a frame is {biggest:.3f} px/frame.\n" + FLOW_KEY,
                  fontsize=8, y=1 - 0.1 / H, va="top")
     fig.flow_scale = scale                    # px/frame per drawn px (tests check the arrows against it)
     return fig

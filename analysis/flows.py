@@ -242,3 +242,18 @@ def combined_direction(cf: ContactFlow, start: int, stop: int, model, rate_hz: f
             total += w["sensor"] * c
             weight += seen * c
     return np.divide(total, weight, out=np.zeros(3), where=weight > 0)
+
+
+def combined_flow_px(cf: ContactFlow, start: int, stop: int, model, rate_hz: float) -> float | None:
+    """Confidence-weighted mean over views of the dynamic mean flow's magnitude over frames
+    [start, stop), px/frame: how fast the pattern moved in the tactile frames. Not a sliding
+    speed: the frames' flow under-reads the pattern's motion by a factor that changes with
+    the speed, the feature and the press (docs/analysis.md, "Flow magnitudes are not speeds")."""
+    total = weight = 0.0
+    for v in cf.views:
+        w = window_summary(cf, v, start, stop, model, rate_hz, "dynamic")
+        if w is not None:
+            c = max(w["confidence"], 1e-3)
+            total += c * w["magnitude"]                     # tagg.window's magnitude: px/frame
+            weight += c
+    return total / weight if weight > 0 else None

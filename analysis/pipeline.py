@@ -189,9 +189,11 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
     aggregates = _segment_aggregates(run, prepared, kept, contacts, flows, model, rate, skipped)
     slips = {}
     for sg in kept:
+        k = run.fingers.index(sg.finger)
         est_ = slp.estimate(fl.find(flows, sg.finger, sg.start, sg.stop),
-                            finger_activation(prepared.activation, run.fingers.index(sg.finger)), sg.start, sg.stop,
-                            model, cfg.slip)
+                            finger_activation(prepared.activation, k), sg.start, sg.stop, model, cfg.slip,
+                            time=run.time, valid=None if run.valid is None else run.valid[:, k],
+                            raw=finger_activation(prepared.raw_activation, k))
         if est_ is not None:
             slips[sg.id] = est_
     crossings = _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) if scheme == labelling.SWEEP else []
@@ -298,7 +300,7 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
                     vec = fl.combined_direction(cf, b.start, b.stop, model, rate)
                     if np.linalg.norm(vec[:2]) > 0:
                         d_s = est.motion_direction_sensor(vec)
-                        row["flow_speed_mm_s"] = float(np.linalg.norm(vec[:2]))
+                        row["flow_px_per_frame"] = fl.combined_flow_px(cf, b.start, b.stop, model, rate)
                 else:
                     skipped.append({"what": "direction", "finger": f, "feature": row["feature"],
                                     "reason": "no tactile flow over this crossing"})

@@ -24,7 +24,8 @@ Scores:
   each motion against the slip estimate of the finger's ``contact`` segment that overlaps it
   most: a translation's direction within 45° (``SLIP_DIRECTION_OK_DEG``) and classed
   ``translation``; a rotation's sense (the sign of ``rotation_deg``) and classed ``rotation``;
-  touch vs slip (classed ``none`` exactly when the object was only touched); contact found.
+  touch vs slip (classed ``none`` exactly when the object was only touched); contact found; the
+  slip onset against the truth's (the skin's breakaway), within 50 ms.
 
 Targets apply only to what the protocol declares (its labels' scheme) and the truth contains:
 crossings of a sweep, phases of a pour, object motions under a still finger.
@@ -221,9 +222,10 @@ def _object_motions(analysis, truth: dict, t0: float):
     for i, kind in enumerate(kinds):
         finger = _s(om["finger"][i])
         start, end = float(om["start"][i]) - t0, float(om["end"][i]) - t0
+        onset = float(om["slip_onset"][i]) - t0 if "slip_onset" in om else float("nan")
         row = {"kind": kind, "finger": finger, "start": start, "end": end,
                "true_direction_sensor_deg": float(om["direction_sensor_deg"][i]),
-               "true_rotation_deg": float(om["rotation_deg"][i])}
+               "true_rotation_deg": float(om["rotation_deg"][i]), "true_slip_onset_s": onset}
         best, overlap = None, 0.0
         for sg in analysis.segments:
             if sg.finger == finger and sg.label == "contact" and sg.id in analysis.slips:
@@ -234,7 +236,10 @@ def _object_motions(analysis, truth: dict, t0: float):
         if best is not None:
             e = analysis.slips[best.id]
             row.update(segment=best.id, slip_class=e["slip_class"], direction_deg=e["slip_direction_sensor_deg"],
-                       rotation_deg=e["rotation_deg"], displacement_mm=e["slip_displacement_mm"])
+                       rotation_deg=e["rotation_deg"], displacement_mm=e["slip_displacement_mm"],
+                       slip_onset_s=e.get("slip_onset_s"))
+            if e.get("slip_onset_s") is not None and math.isfinite(onset):
+                row["slip_onset_error_ms"] = 1e3 * (e["slip_onset_s"] - onset)
             row["touch_vs_slip_correct"] = (e["slip_class"] == "none") == (kind == "none")
             if kind == "translate" and e["slip_direction_sensor_deg"] is not None:
                 err = abs((e["slip_direction_sensor_deg"] - row["true_direction_sensor_deg"] + 180.0) % 360.0 - 180.0)
@@ -254,8 +259,17 @@ def _object_motions(analysis, truth: dict, t0: float):
                "slip_direction_correct_fraction": frac("direction_correct", "translate"),
                "rotation_sense_correct_fraction": frac("rotation_sense_correct", "rotate"),
                "touch_vs_slip_correct_fraction": frac("touch_vs_slip_correct"),
-               "slip_class_correct_fraction": frac("class_correct")}
+               "slip_class_correct_fraction": frac("class_correct"),
+               "slip_onset_within_50ms_fraction": _onset_fraction(rows)}
     return rows, summary
+
+
+def _onset_fraction(rows) -> float | None:
+    """Share of the slips (motions whose skin broke away) dated within 50 ms of their truth."""
+    slips = [r for r in rows if r["kind"] != "none" and math.isfinite(r["true_slip_onset_s"])]
+    if not slips:
+        return None
+    return float(np.mean([abs(r.get("slip_onset_error_ms", math.inf)) <= 50.0 for r in slips]))
 
 
 def _seg_end(time, sg) -> float:

@@ -1,57 +1,52 @@
-"""Whole-segment slip estimate of one finger: does the contact slip, which way, does it turn.
+"""Whole-segment slip estimate of one finger: did the contact slip, which way, did it turn, when.
 
-Evidence (each in the sensor's x–y plane, mm, and about the pad normal, deg):
+A record of a real contact usually begins in contact and has no tare: the pattern's offset from
+the unloaded sensor then says *where* the touch sits, not whether anything moved. So whether it
+slipped — and how — is decided on **motion since the contact's own first settled frames** (its
+*reference window*, :mod:`analysis.slip_motion`), and the unloaded sensor is used only for what
+it means: the direction in which the skin, and the pattern, were dragged.
 
-- ``static_unloaded``: the static tactile flow from the unloaded sensor (an empty frame) to
-  each frame, mean over the segment: where the pressure pattern sits relative to the sensor
-  at rest. A still finger on an object pulled one way carries the skin (and the pattern)
-  that way, so this offset carries the direction even in a record that begins in contact.
-  Farnebäck explains a pattern appearing from nothing as the unpressed skin around it moving
-  *out* of it, so the mean flow points *away* from the pressed region: opposite to the
-  centre of pressure's offset for every real grasp pattern tested (199 of 200 ff/th
-  patterns of ``tests/data/biotac_sp_grasps``) and for simulated blobs up to σ ≈ 5 mm
-  (the sign turns for a blob covering most of the pad, σ ≈ 9 mm). The combination uses the
-  negated vector;
-- ``static_onset``: the static flow from the frame where the contact became established (or,
-  in a record that begins in contact, its first settled frame), mean over the segment's
-  frames after it: how far the pattern moved since;
-- ``dynamic``: the frame-to-frame flow summed over the segment: the net motion during it;
-- ``cop_unloaded``: the centre of pressure (activation-weighted taxel position) relative to
-  where the taxels put an object resting on the pad (a press at the sensor model's lowest point,
-  :func:`tactile.aggregate.press_centre`), mean over the segment — no flow at all;
-- ``cop_onset``: the centre of pressure relative to its position at the reference frame.
+Evidence (sensor x–y plane, mm; about the pad normal, deg, + = counter-clockwise seen from
+outside the pad, i.e. about the sensor's −z):
 
-Rotation (deg, + = counter-clockwise seen from outside the pad, i.e. about −z of the sensor
-frame): the static flow's rotation from the onset reference (curl / 2 of the displacement
-field in the views of ``analysis.slip.views``; the bottom view looks along +z, so its curl is
-negated), mean over the segment's frames after the reference; the dynamic flow's summed
-rotation beside it as evidence.
+- ``motion``: the centre of pressure's displacement from the reference window, frame by frame
+  (its 90th percentile over the contact is ``slip_displacement_mm``), and the pattern's shape
+  change (``analysis.slip_motion``);
+- ``rotation``: the dynamic flow's rotation summed over the contact's frames where the pattern
+  moves (curl / 2 per frame, in the views that look along the pad normal, frames where at least
+  ``moving_confidence`` of the footprint moves); the static flow's rotation from the
+  reference window; and the turn of the pattern's second moments (the antisymmetric part of
+  the electrode change: a twisted skin loads two opposite quadrants of an elongated contact);
+- ``onset``: when the motion began and when the skin broke away (:mod:`analysis.slip_onset`);
+- as before: ``static_unloaded`` (the static flow from an empty frame, mean over the segment;
+  Farnebäck explains a pattern appearing from nothing as the unpressed skin moving *out* of it,
+  so it points *away* from the pressed region: negated where it is used), ``static_onset`` (from
+  the reference frame), ``dynamic`` (the frame-to-frame flow summed), ``cop_unloaded`` (the
+  centre of pressure − where the taxels put an object resting on the pad,
+  :func:`tactile.aggregate.press_centre`), ``cop_onset`` (− its position at the reference)
+  and ``cop_trajectory_mm``.
 
-Combination (documented in docs/analysis.md):
+Decision (documented in docs/analysis.md, constants in ``analysis.slip``):
 
-- the *reference* is the contact onset when the contact begins inside the record after a
-  rest, else the unloaded sensor;
-- ``slip_direction_sensor_deg``: the direction of the weighted sum of the displacement
-  vectors (mm) of the tactile flow from that reference (weight 1; from the unloaded sensor,
-  negated as above), the centre of pressure from that reference (weight 1), and, when they
-  moved more than ``min_displacement_mm``, the dynamic flow (weight 1/2) and — in a record
-  that begins in contact — the static flow from its first settled frame (weight 1/2: the
-  motion seen during the record). A source that moved more counts more: a light contact's
-  pattern barely shifts from its onset while its flow travels along the slip. The agreement
-  |Σ w v| / Σ w |v| (0..1; 1: every source points the same way) is reported;
-- ``slip_displacement_mm``: the larger of the centre of pressure's displacement from the
-  reference and the net distance the dynamic flow travelled over the segment: a firm contact
-  pulled along shifts its pattern by the skin's stretch; a light one slips almost at once,
-  its pattern barely shifted, and the stick-slip of the sliding (a slow stretch, a fast
-  release the flow under-reads) leaves a net flow along the motion. (The flow's magnitude
-  from an empty frame is not a distance: 0.2–0.9 of the centre of pressure's, with the
-  pattern's width.)
-- ``slip_class``: ``translation`` if the displacement ≥ ``min_displacement_mm``; else
-  ``rotation`` if |rotation| ≥ ``min_rotation_deg``; else ``none`` (only touched). A
-  translation turns the pattern's flow a little too (up to ~2° in the simulated grid), so the
-  displacement decides first;
-- ``confidence`` (0..1): translation min(1, d / 2d_min) × the direction's agreement; rotation
-  min(1, |rot| / 2θ_min) × (1 − d / d_min); none 1 − max(d / d_min, |rot| / θ_min).
+- **slipped or only touched**: the contact slipped when its pattern moved at least
+  ``min_displacement_mm`` from the reference window, or turned significantly (below); a touch
+  held still — however far from the pad's middle it sits, however its load wanders — does not;
+- **rotation or translation**: a turn is significant when the summed dynamic rotation (of the
+  frames where the pattern moves) is at least ``min_rotation_deg``; the contact *rotated* when
+  that turn, as the arc it sweeps at the contact's radius, is at least ``arc_ratio`` of the
+  displacement (an object turned about an axis away from the contact also drags the contact
+  sideways; a translation's own spurious turn is far smaller than its displacement);
+- ``slip_direction_sensor_deg`` (the direction the object moves relative to the finger): the
+  weighted sum of the unit vectors of the centre of pressure's motion from the reference window
+  (weight 2), its offset from the taxels' centroid (weight 1: the stretched skin carries the
+  pattern the way the object was dragged, even where the record began after the drag) and the
+  negated static flow from the unloaded sensor (weight 1); ``direction_agreement`` is
+  |Σ w u| / Σ w;
+- ``confidence`` (0..1): how far the deciding evidence is past its threshold, times the
+  direction's agreement for a translation;
+- a contact the record does not show well enough to decide — shorter than ``min_decision_s``
+  after its reference window, crossed by a gap in time, or with bridged (out-of-range)
+  electrode samples — gets ``slip_class`` ``None`` and a ``reason``; never a confident class.
 """
 
 from __future__ import annotations
@@ -64,12 +59,20 @@ from tactile_flow.tactile import aggregate as tagg
 from tactile_flow.tactile.pipeline import UNLOADED
 
 from . import flows as fl
+from .slip_motion import pattern_motion
+from .slip_onset import knee
 
 ONSET = fl.ONSET
 CLASSES = ("translation", "rotation", "none")
-WEIGHTS = {"flow": 1.0, "cop": 1.0, "dynamic": 0.5, "change": 0.5}
+FIRST_SETTLED = "first_settled"
+"""``reference`` of a contact the record begins in: its motion is measured from its first settled frames."""
+DIRECTION_WEIGHTS = {"motion": 2.0, "cop_unloaded": 1.0, "static_unloaded": 1.0}
 PAD_NORMAL_COS = 0.9
 """Rotation about the pad normal is read only in views that look along it (|look·z| above this)."""
+GAP_FACTOR = 3.0
+"""A frame interval this many times the record's median is a gap in time."""
+MAX_BRIDGED = 0.05
+"""A contact with more of its frames bridged (electrodes out of range) than this is not decided."""
 
 
 def _vec(v) -> dict:
@@ -100,104 +103,318 @@ def _static(cf, views, reference, s, e, model, rotation_too=False):
     return np.mean(vecs, axis=0), (float(np.mean(rots)) if rotation_too and rots else None)
 
 
-def _dynamic(cf, views, s, e, model):
-    """Net dynamic displacement (2,) mm and summed rotation (deg, about −z) over frames [s, e)."""
-    vecs, rots = [], []
-    for v in views:
-        vr = cf.views.get(v)
-        if vr is None:
-            continue
-        a, b = max(s - cf.window[0], 1), e - cf.window[0]
-        if b <= a:
-            continue
-        plan = model.plans[v]
-        vecs.append(plan.image_to_sensor(vr.dynamic.mean[a:b].sum(axis=0)) * plan.mm_per_px)
-        if abs(plan.look[2]) > PAD_NORMAL_COS:
-            rots.append(-np.degrees(vr.dynamic.curl[a:b].sum() / 2.0) * np.sign(plan.look[2]))
-    if not vecs:
-        return None, None
-    return np.mean(vecs, axis=0), (float(np.mean(rots)) if rots else None)
+def _normal_views(cf, views, model) -> list:
+    return [v for v in views if v in cf.views and abs(model.plans[v].look[2]) > PAD_NORMAL_COS]
 
 
-def estimate(cf, activation, start: int, stop: int, model, cfg) -> dict | None:
+def rotation_series(cf, views, s, e, model, moving: float = 0.0) -> np.ndarray | None:
+    """Per-frame rotation (deg, + about −z) of the dynamic flow over frames [s, e) (absolute),
+    mean over the views along the pad normal (frame s is the first pair's end), counting only
+    frames where at least ``moving`` of the footprint moves (the flow's confidence): the flow of
+    a still pattern under a real sensor's drift turns by a few thousandths of a degree a frame,
+    always the same way, which over a record adds up to degrees. ``None`` without such a view."""
+    parts = []
+    for v in _normal_views(cf, views, model):
+        agg = cf.views[v].dynamic
+        a, b = s - cf.window[0], e - cf.window[0]
+        c = np.where(agg.confidence[a:b] >= moving, agg.curl[a:b], 0.0)
+        parts.append(-np.degrees(c / 2.0) * np.sign(model.plans[v].look[2]))
+    return np.mean(parts, axis=0) if parts else None
+
+
+def static_rotation_series(cf, views, ref: int, e: int, model) -> np.ndarray | None:
+    """Rotation (deg, + about −z) of the pattern since frame ``ref`` over frames [ref, e) (absolute),
+    from the static flow of the contact's onset reference: its rotation at each frame minus its
+    rotation at ``ref`` (small turns compose by adding). ``None`` without such a flow."""
+    parts = []
+    for v in _normal_views(cf, views, model):
+        series = fl.static_series(cf, v, ONSET, model)
+        if series is not None:
+            a, b = ref - cf.window[0], e - cf.window[0]
+            rot = -np.degrees(series[1][a:b]) * np.sign(model.plans[v].look[2])
+            parts.append(rot - rot[0])
+    return np.mean(parts, axis=0) if parts else None
+
+
+def _unfit(time, valid, start, stop) -> str | None:
+    """Why frames [start, stop) cannot be decided on (a gap in time, bridged samples), or None."""
+    if time is not None and stop - start > 2:
+        steps = np.diff(np.asarray(time[start:stop], float))
+        whole = np.diff(np.asarray(time, float))
+        typical = float(np.median(whole)) if len(whole) else 0.0
+        if typical > 0 and steps.max() > GAP_FACTOR * typical:
+            i = int(np.argmax(steps))
+            return (f"the record has a gap of {steps[i]:.3f} s at {float(time[start + i]):.2f} s inside this "
+                    f"contact (frames every {typical:.3f} s): its motion cannot be followed across it")
+    if valid is not None:
+        bad = int((~np.asarray(valid[start:stop], bool)).sum())
+        if bad > MAX_BRIDGED * (stop - start):
+            return (f"{bad} of this contact's {stop - start} frames had electrodes out of range (saturated or "
+                    f"dead) and were bridged: too many to decide whether it slipped")
+    return None
+
+
+def motion_reference(cf, activation, start: int, stop: int, rate: float, cfg) -> int:
+    """First frame of the reference window (absolute). A contact that begins inside the record
+    was pressed: its reference is the first frame whose total positive activation reaches
+    :data:`LOADED` of its median over the ``reference_horizon_s`` after the contact settled (the
+    press has finished; a later slip that loads the skin's leading side cannot move the
+    reference past its own start, as a median over the whole contact would). A contact the
+    record begins in has no press to wait for: its first settled frame."""
+    first = max(start, cf.settled if cf.settled is not None else start)
+    if first >= stop or cf.begins_in_contact:
+        return min(first, stop - 1)
+    horizon = max(2, int(round(cfg.reference_horizon_s * rate)))
+    load = np.clip(np.asarray(activation[first:min(stop, first + horizon)], float), 0.0, None).sum(axis=1)
+    hits = np.flatnonzero(load >= LOADED * float(np.median(load)))
+    return first + (int(hits[0]) if hits.size else 0)
+
+
+LOADED = 0.8
+"""The reference window starts once the press has brought the load to this share of its level
+over the time after settling (``analysis.slip.reference_horizon_s``)."""
+
+
+def _loaded_end(load, fraction: float) -> int:
+    """Frames of ``load`` (after the reference) before the contact unloads: up to the last frame at
+    least ``fraction`` of the median load."""
+    keep = np.flatnonzero(load >= fraction * np.median(load))
+    return int(keep[-1]) + 1 if len(keep) else len(load)
+
+
+def estimate(cf, activation, start: int, stop: int, model, cfg, time=None, valid=None, raw=None) -> dict | None:
     """The slip estimate of one segment [start, stop) (absolute frames) of the finger of ``cf``.
 
-    ``activation``: (T, 24) smoothed activation of that finger, kΩ; ``cfg``: the
-    ``analysis.slip`` config (:class:`analysis.config.Slip`). ``None`` when no flow window
-    covers the segment.
+    ``activation``: (T, n) smoothed activation of that finger, kΩ; ``cfg``: the ``analysis.slip``
+    config (:class:`analysis.config.Slip`); ``time`` (T,) s, the record's frame times;
+    ``valid`` (T,) bool, that finger's frames whose electrodes were all in range; ``raw`` (T, n)
+    its unsmoothed activation, kΩ (the slip onset's release is dated on it: the smoother spreads a
+    sudden change over a tenth of a second either way). ``None`` when no flow window covers the
+    segment.
     """
     if cf is None or stop - start < 2:
         return None
     views = [v for v in cfg.views if v in cf.views]
     onset = cf.reference
     true_onset = onset is not None and not cf.begins_in_contact and onset < stop
-    ref_name = ONSET if true_onset else UNLOADED
-    after = max(start, onset) if onset is not None else start
+    rate = 1.0 / float(np.median(np.diff(time))) if time is not None and len(time) > 1 else 100.0
+    ref = motion_reference(cf, activation, start, stop, rate, cfg)
+    evidence = _legacy_evidence(cf, activation, start, stop, max(start, onset) if onset is not None else start,
+                                onset, views, model)
+    out = {"slip_direction_sensor_deg": None, "slip_displacement_mm": None, "rotation_deg": None,
+           "slip_class": None, "confidence": None, "direction_agreement": None, "slip_onset_s": None,
+           "slip_onset_uncertainty_s": None, "reason": None,
+           "reference": ONSET if true_onset else FIRST_SETTLED, "reference_s": None,
+           "begins_in_contact": bool(cf.begins_in_contact), "evidence": evidence}
+    reason = _unfit(time, valid, ref, stop)
+    n_ref = max(2, int(round(cfg.reference_s * rate)))
+    pm = pattern_motion(activation, model.taxels, ref, stop, n_ref) if reason is None else None
+    if reason is None and pm is None:
+        reason = "too little of the pattern is pressed after the contact's first settled frames to follow it"
+    if pm is not None:
+        end = _loaded_end(pm.load, cfg.loaded_fraction)
+        span = (end - pm.reference_frames) / rate
+        if span < cfg.min_decision_s:
+            reason = (f"contact too short to decide: {span:.2f} s after its first settled frames "
+                      f"(analysis.slip.min_decision_s = {cfg.min_decision_s} s)")
+    if time is not None and ref < len(time):
+        out["reference_s"] = float(time[ref])
+    if reason is not None:
+        out["reason"] = reason
+        return out
+    motion = _motion_evidence(pm, end)
+    rotation, turned = _rotation_evidence(cf, views, ref, ref + end, model, pm, end, cfg.moving_confidence)
+    evidence["motion"], evidence["rotation"] = motion, rotation
+    direction, agreement = _direction(motion, evidence)
+    slip_class, confidence = classify(motion["displacement_mm"], rotation, pm.radius_mm, agreement, cfg)
+    translated = slip_class == "translation"
+    out.update(slip_direction_sensor_deg=direction if translated else None,
+               slip_displacement_mm=motion["displacement_mm"], rotation_deg=rotation["rotation_deg"], slip_class=slip_class, confidence=confidence,
+               direction_agreement=agreement if translated else None)
+    evidence["direction"] = {"direction_deg": direction, "agreement": agreement}
+    when = _onset(pm, end, turned, slip_class)
+    if when is not None and raw is not None:
+        _release(when, np.asarray(raw[ref:ref + end], float), pm.reference_frames, rate)
+    evidence["onset"] = when
+    if slip_class in ("translation", "rotation") and when is not None and time is not None:
+        out["slip_onset_s"] = float(time[ref + when["slip_frame"]])
+        out["slip_onset_uncertainty_s"] = when["uncertainty_frames"] / rate
+        when["motion_onset_s"] = float(time[ref + when["motion_frame"]])
+    return out
+
+
+def _legacy_evidence(cf, activation, start, stop, ref, onset, views, model) -> dict:
+    """The static, dynamic and centre-of-pressure evidence of the whole segment (module docstring)."""
     evidence = {}
     flow_u, _ = _static(cf, views, UNLOADED, start, stop, model)
     evidence["static_unloaded"] = _vec(flow_u if flow_u is not None else [np.nan] * 2)
     flow_o = rot_o = None
-    if onset is not None and after < stop:
-        flow_o, rot_o = _static(cf, views, ONSET, after, stop, model, rotation_too=True)
-    evidence["static_onset"] = {**_vec(flow_o if flow_o is not None else [np.nan] * 2),
-                                "rotation_deg": rot_o, "true_onset": true_onset}
-    dyn, dyn_rot = _dynamic(cf, views, start, stop, model)
-    evidence["dynamic"] = {**_vec(dyn if dyn is not None else [np.nan] * 2), "rotation_deg": dyn_rot}
+    if onset is not None and ref < stop:
+        flow_o, rot_o = _static(cf, views, ONSET, ref, stop, model, rotation_too=True)
+    evidence["static_onset"] = {**_vec(flow_o if flow_o is not None else [np.nan] * 2), "rotation_deg": rot_o,
+                                "true_onset": bool(onset is not None and not cf.begins_in_contact)}
+    vecs, rots = [], []
+    for v in views:
+        vr = cf.views.get(v)
+        a, b = max(start - cf.window[0], 1), stop - cf.window[0]
+        if vr is None or b <= a:
+            continue
+        plan = model.plans[v]
+        vecs.append(plan.image_to_sensor(vr.dynamic.mean[a:b].sum(axis=0)) * plan.mm_per_px)
+        if abs(plan.look[2]) > PAD_NORMAL_COS:
+            rots.append(-np.degrees(vr.dynamic.curl[a:b].sum() / 2.0) * np.sign(plan.look[2]))
+    dyn = np.mean(vecs, axis=0) if vecs else np.full(2, np.nan)
+    evidence["dynamic"] = {**_vec(dyn), "rotation_deg": float(np.mean(rots)) if rots else None}
     cop, _ = tagg.centre_of_pressure(activation[start:stop], model.taxels)
     good = np.all(np.isfinite(cop), axis=1)
     # where the taxels put an object resting on the pad: a press at the sensor model's lowest point
+    # (the taxels' centroid only when they lie evenly about it: the classic BioTac's is 3.2 mm off)
     centroid = (model.taxels.mean(axis=0) if model.sensor is None
                 else tagg.press_centre(model.taxels, model.sensor.shape.pole))
-    cop_u = cop[good].mean(axis=0) - centroid if good.any() else np.full(3, np.nan)
-    evidence["cop_unloaded"] = _vec(cop_u)
+    evidence["cop_unloaded"] = _vec(cop[good].mean(axis=0) - centroid if good.any() else np.full(3, np.nan))
     cop_o = np.full(3, np.nan)
-    if onset is not None and after < stop:
+    if onset is not None and ref < stop:
         ref_cop, _ = tagg.centre_of_pressure(activation[onset:onset + 1], model.taxels)
-        seg = cop[after - start:][good[after - start:]]
+        seg = cop[ref - start:][good[ref - start:]]
         if len(seg) and np.all(np.isfinite(ref_cop)):
             cop_o = seg.mean(axis=0) - ref_cop[0]
     evidence["cop_onset"] = _vec(cop_o)
     if good.any():
         evidence["cop_trajectory_mm"] = {"first": cop[good][0][:2].tolist(), "last": cop[good][-1][:2].tolist(),
                                          "mean": cop[good].mean(axis=0)[:2].tolist()}
+    return evidence
 
-    flow_vec = flow_o if true_onset else (None if flow_u is None else -flow_u)
-    cop_vec = cop_o if true_onset else cop_u
-    parts = [(WEIGHTS["flow"], flow_vec), (WEIGHTS["cop"], cop_vec)]
-    if dyn is not None and np.hypot(*dyn[:2]) >= cfg.min_displacement_mm:
-        parts.append((WEIGHTS["dynamic"], dyn))
-    if not true_onset and flow_o is not None and np.hypot(*flow_o[:2]) >= cfg.min_displacement_mm:
-        parts.append((WEIGHTS["change"], flow_o))
-    vectors, weights = [], []
-    for w, v in parts:
-        if v is None or not np.all(np.isfinite(v[:2])) or not np.any(v[:2]):
+
+def _motion_evidence(pm, end: int) -> dict:
+    """The pattern's motion since its reference window, over its loaded frames [0, end)."""
+    d = pm.displacement[:end]
+    mag = np.hypot(d[:, 0], d[:, 1])
+    moved = float(np.percentile(mag, 90))
+    far = mag >= 0.5 * mag.max() if mag.max() > 0 else np.ones(len(mag), bool)
+    vec = d[far].mean(axis=0)
+    return {**_vec(vec), "displacement_mm": moved, "final_mm": float(np.hypot(*d[-max(1, end // 5):].mean(axis=0))),
+            "cop_noise_mm": pm.cop_noise_mm, "change": float(np.percentile(pm.change[:end], 90)),
+            "change_noise": pm.change_noise, "radius_mm": pm.radius_mm, "elongation": pm.elongation,
+            "reference_frames": pm.reference_frames, "frames": int(end)}
+
+
+def _rotation_evidence(cf, views, ref, stop, model, pm, end, moving) -> tuple[dict, np.ndarray | None]:
+    """Rotation about the pad normal over the contact's loaded frames [ref, stop) (module
+    docstring), and the dynamic rotation summed frame by frame from the reference (deg)."""
+    per_frame = rotation_series(cf, views, ref + 1, stop, model, moving)
+    dynamic = moving_frames = None
+    if per_frame is not None and len(per_frame) > 1:
+        dynamic = float(per_frame.sum())
+        moving_frames = int(np.count_nonzero(per_frame))
+    static = None
+    if cf.reference is not None:
+        series = static_rotation_series(cf, views, ref, stop, model)
+        if series is not None and len(series):
+            static = float(np.median(series[-max(1, len(series) // 5):]))
+    tail = pm.turn_deg[max(0, end - max(1, end // 5)):end]
+    turn = float(np.median(tail)) if len(tail) else None
+    both = [v for v in (dynamic, static) if v is not None]
+    evidence = {"rotation_deg": float(np.mean(both)) if both else None, "dynamic_deg": dynamic,
+                "moving_frames": moving_frames,
+                "static_deg": static, "pattern_turn_deg": turn, "pattern_elongation": pm.elongation}
+    return evidence, (None if per_frame is None else np.r_[0.0, np.cumsum(per_frame)])
+
+
+def _direction(motion: dict, evidence: dict) -> tuple[float | None, float | None]:
+    """Direction (deg) of the weighted unit vectors of the motion, the offset from the centroid and
+    the negated unloaded static flow (module docstring), and their agreement (0..1)."""
+    parts = []
+    for name, w in DIRECTION_WEIGHTS.items():
+        v = (motion if name == "motion" else evidence.get(name, {})).get("vector_mm")
+        if v is None or not np.any(v):
             continue
-        vectors.append(np.asarray(v[:2], float))
-        weights.append(w)
-    direction = agreement = None
-    if vectors:
-        total = np.sum([w * v for w, v in zip(weights, vectors)], axis=0)
-        agreement = float(np.hypot(*total) / sum(w * np.hypot(*v) for w, v in zip(weights, vectors)))
-        direction = float(np.degrees(np.arctan2(total[1], total[0]))) if np.any(total) else None
-    travelled = [np.hypot(*v[:2]) for v in (cop_vec, dyn) if v is not None and np.all(np.isfinite(v[:2]))]
-    displacement = float(max(travelled)) if travelled else None
-    rotation = rot_o
-    slip_class, confidence = classify(displacement, rotation, agreement, cfg)
-    return {"slip_direction_sensor_deg": direction, "slip_displacement_mm": displacement, "rotation_deg": rotation,
-            "slip_class": slip_class, "confidence": confidence, "direction_agreement": agreement,
-            "reference": ref_name, "begins_in_contact": bool(cf.begins_in_contact), "evidence": evidence}
+        v = np.asarray(v, float) * (-1.0 if name == "static_unloaded" else 1.0)
+        parts.append((w, v / np.hypot(*v)))
+    if not parts:
+        return None, None
+    total = np.sum([w * u for w, u in parts], axis=0)
+    agreement = float(np.hypot(*total) / sum(w for w, _ in parts))
+    return (float(np.degrees(np.arctan2(total[1], total[0]))) if np.any(total) else None), agreement
 
 
-def classify(displacement, rotation, agreement, cfg) -> tuple[str | None, float | None]:
-    """``(slip_class, confidence)`` from the displacement (mm), rotation (deg) and the direction's
-    agreement (module doc); ``(None, None)`` without a displacement."""
+def classify(displacement, rotation: dict, radius_mm: float, agreement, cfg) -> tuple[str | None, float | None]:
+    """``(slip_class, confidence)`` from the displacement since the reference window (mm), the
+    rotation evidence, the contact's radius (mm) and the direction's agreement (module
+    docstring); ``(None, None)`` without a displacement."""
     if displacement is None or not math.isfinite(displacement):
         return None, None
     d = displacement / max(cfg.min_displacement_mm, 1e-9)
-    rot = abs(rotation) if rotation is not None and math.isfinite(rotation) else 0.0
-    r = rot / max(cfg.min_rotation_deg, 1e-9)
+    rot = rotation.get("rotation_deg")
+    turned = 0.0
+    if rot is not None and math.isfinite(rot):
+        turned = abs(rot) / max(cfg.min_rotation_deg, 1e-9)
+    arc = abs(rot or 0.0) * math.pi / 180.0 * max(radius_mm, 0.0)
+    if turned >= 1.0 and arc >= cfg.arc_ratio * displacement:
+        return "rotation", float(min(1.0, turned / 2.0))
     if d >= 1.0:
         return "translation", float(min(1.0, d / 2.0) * (agreement or 0.0))
-    if r >= 1.0:
-        return "rotation", float(min(1.0, r / 2.0) * (1.0 - d))
-    return "none", float(max(0.0, 1.0 - max(d, r)))
+    return "none", float(max(0.0, 1.0 - max(d, turned)))
+
+
+def _onset(pm, end: int, turned, slip_class: str | None) -> dict | None:
+    """The knee of the motion (:mod:`analysis.slip_onset`): the centre of pressure's travel along
+    its direction for a translation (or a touch: reported as evidence only), the summed dynamic
+    rotation for a rotation; frames relative to the reference window's first."""
+    d = pm.displacement[:end]
+    mag = np.hypot(d[:, 0], d[:, 1])
+    if slip_class == "rotation" and turned is not None:
+        signal, what = turned, "rotation"
+    else:
+        far = mag >= 0.5 * mag.max() if mag.max() > 0 else np.ones(len(mag), bool)
+        u = d[far].mean(axis=0)
+        n = float(np.hypot(*u))
+        signal, what = (d @ (u / n) if n > 0 else mag), "displacement"
+    k = knee(signal)
+    if k is None:
+        return None
+    return {"signal": what, "motion_frame": k.motion, "slip_frame": k.slip,
+            "uncertainty_frames": max(0.5, (k.slip_hi - k.slip_lo) / 2.0), "slowed": k.slowed,
+            "rise": k.rise, "dated_by": "knee"}
+
+
+def _release(when: dict, raw, n_ref: int, rate: float) -> None:
+    """Date gross slip by the skin's release (in place in ``when``): when the whole contact breaks
+    away, the stretch the stuck skin had built up is let go at once and the traction falls to the
+    kinetic level, so the load the stretch put on the electrodes ahead of it falls within a few
+    frames (the first tooth of the stick-slip; ``tactile.slip``'s ``release`` criterion sees the
+    same thing live). On the unsmoothed activation's positive change since the reference window,
+    running-median filtered over 3 frames, the first fall after the motion onset, from a new
+    high at least :data:`RELEASE_HEIGHT` of the way up to the window's highest load, by at least
+    :data:`RELEASE_SHARE` of the rise so far and :data:`RELEASE_NOISE` × its frame-to-frame noise
+    marks it (a press that settles, or the holder's wander, lowers the load too, but not from
+    the top of a stretch): the slip onset is the frame before the fall (uncertainty: the fall's length). Without
+    such a fall the knee stands."""
+    ref = raw[:n_ref].mean(axis=0)
+    load = np.clip(raw - ref, 0.0, None).sum(axis=1)
+    if len(load) < 8:
+        return
+    smooth = np.array([np.median(load[max(0, i - 1):i + 2]) for i in range(len(load))])
+    steps = np.diff(smooth[:n_ref + 1]) if n_ref > 2 else np.diff(smooth)
+    noise = 1.4826 * float(np.median(np.abs(steps - np.median(steps)))) if len(steps) else 0.0
+    start = when["motion_frame"]
+    horizon = min(len(smooth), when["slip_frame"] + int(round(RELEASE_AFTER_S * rate)) + 1)
+    fall = max(1, int(round(RELEASE_FRAMES)))
+    top = float(smooth[start:horizon].max()) - smooth[start]
+    for i in range(start + 1, horizon - 1):
+        rise = smooth[i] - smooth[start]
+        drop = smooth[i] - smooth[i + 1:i + 1 + fall].min()
+        if rise >= RELEASE_HEIGHT * top > 0 and smooth[i] >= smooth[start:i + 1].max() and \
+                drop >= max(RELEASE_SHARE * rise, RELEASE_NOISE * noise):
+            bottom = i + 1 + int(np.argmin(smooth[i + 1:i + 1 + fall]))
+            when.update(slip_frame=i + 1, uncertainty_frames=max(1.0, (bottom - i) / 2.0), dated_by="release")
+            return
+
+
+RELEASE_SHARE = 0.1
+RELEASE_HEIGHT = 0.5
+RELEASE_NOISE = 4.0
+RELEASE_FRAMES = 3
+RELEASE_AFTER_S = 0.4
+"""The release is looked for up to this long after the knee (the knee lands early on a partial slip)."""
+
+

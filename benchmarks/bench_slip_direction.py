@@ -1,22 +1,32 @@
-"""Accuracy of the slip estimate on simulated slip-in-place runs, per evidence source, and the
-real grasp frames' contact detection rate.
+"""The slip estimate on simulated slip-in-place runs, per evidence source, and on real touches.
 
-    python benchmarks/bench_slip_direction.py [--out DIR] [--noise 0.5 1 2] [--quick] [--sensor biotac_sp biotac]
+    python benchmarks/bench_slip_direction.py [--out DIR] [--grid classic|varied] [--noise 1]
+                                              [--real-touch 6] [--quick] [--sensor biotac_sp biotac]
 
-Runs (or reuses, in ``--out``) the slip-in-place grid of ``conf/experiment/slip_in_place_grid.yaml``
-(6 directions × 2 rotations × touch × 2 forces × 2 objects × with/without tare) at each noise
-level (``hardware.sensor.noise_scale`` and the object's tremor scaled together) for each sensor
-model (``sensor=``: by default the BioTac SP and the classic BioTac), analyses every run with
-``tactile-analyze``'s defaults and scores it against the simulator's truth. Prints one JSON line
-per (sensor, noise, force, object, tare) cell and evidence source, then the totals per sensor,
-then a markdown table per sensor (docs/analysis.md, docs/sensors.md). Sources:
+Runs (or reuses, in ``--out``) the slip-in-place grid — ``classic``: the 72 conditions of
+``+experiment=slip_in_place_grid`` (6 directions 60° apart, both rotation senses, a touch × light
+1.3 N and firm 5 N × flat and cylinder × with and without tare); ``varied``: the 120 of
+``protocols.slip_grid.varied_conditions()`` (contacts off the pad's pole, twists about an axis
+away from the contact, pulls and twists of every speed, a hand's wander) — at each noise level,
+analyses every run with ``tactile-analyze``'s defaults and scores it against the simulator's
+truth. Then it writes records of real touches (``tests/real_touch.py``: real contact frames held
+under the real resting noise, from the first frame and reached from rest; ``--real-touch`` frames
+per finger and grasp file) and counts how many read as touch.
 
-- ``static_unloaded`` (negated: docs/analysis.md), ``static_onset``, ``dynamic``,
-  ``cop_unloaded``, ``cop_onset``: each alone — direction of translations within 45°, rotation
-  sense of rotations (the flow sources that measure one), touch vs slip at the best single
-  threshold on the source's magnitude (an upper bound: what fitting one threshold could reach);
-- ``combined``: the slip estimate as shipped (``slip_class``, ``slip_direction_sensor_deg``,
-  ``rotation_deg`` with the default thresholds).
+Each sensor model of ``--sensor`` (``conf/sensor/``; by default the BioTac SP and the classic
+BioTac, docs/sensors.md) runs the grid with its own fingertips, and its lines and tables are
+headed by its name. Prints JSON lines (per condition cell: tare/no tare × light/firm; the totals; the onset; the
+real touches), then markdown tables (docs/analysis.md):
+
+- the confusion matrix of the shipped estimate over the true motion (each translation
+  direction, each rotation sense, touch) and what it was read as (translations, true and read,
+  binned to the nearest of 0°, 60°, … 300°; a rotation by its sense; touch), per cell and over all;
+- per evidence source, the shipped decision with that source alone in its place: the
+  direction of translations from ``motion`` (the centre of pressure since the first settled
+  frames), ``cop_unloaded``, ``static_unloaded`` (negated), ``static_onset``, ``dynamic``; the
+  rotation from ``rotation_dynamic``, ``rotation_static``, ``rotation_turn`` (the pattern's
+  second moments) or both averaged (shipped) — each class's share read right;
+- the slip onset's error against the truth's (ms): within 50 ms, median, 90th percentile.
 """
 
 from __future__ import annotations
@@ -25,15 +35,17 @@ import argparse
 import json
 import math
 import os
+import shutil
 import sys
 import time
-from collections import defaultdict
+from collections import Counter, defaultdict
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-SOURCES = ("static_unloaded", "static_onset", "dynamic", "cop_unloaded", "cop_onset")
+DIRECTION_SOURCES = ("motion", "cop_unloaded", "static_unloaded", "static_onset", "dynamic")
+ROTATION_SOURCES = ("rotation_mean", "rotation_dynamic", "rotation_static", "rotation_turn")
 SIGN = {"static_unloaded": -1.0}
 
 
@@ -41,159 +53,232 @@ def angle_error(a, b) -> float:
     return abs((a - b + 180.0) % 360.0 - 180.0)
 
 
-def runs(out: Path, noise: float, quick: bool, sensor: str = "biotac_sp"):
-    """Yield (condition, store) for every grid run at ``noise`` with the sensor model ``sensor``,
-    running the missing ones."""
-    from tactile_flow.protocols.slip_grid import conditions, run_slip_in_place
-    conds = conditions()
+def runs(out: Path, grid: str, noise: float, quick: bool, sensor: str = "biotac_sp"):
+    """Yield (condition, store) for every run of the grid at ``noise`` with the fingertips of the
+    sensor model ``sensor``, running the missing ones (the BioTac SP's in ``out/<grid>``, as
+    before; another model's in ``out/<sensor>/<grid>``)."""
+    from tactile_flow.protocols.slip_grid import conditions, run_slip_in_place, varied_conditions
+    conds = varied_conditions() if grid == "varied" else conditions()
     if quick:
-        conds = [c for c in conds if c.surface == "flat" and c.press_force == conds[0].press_force]
+        conds = conds[::4]
     for c in conds:
-        d = out / sensor / f"noise{noise:g}" / c.name
+        d = (out if sensor == "biotac_sp" else out / sensor) / grid / f"noise{noise:g}" / c.name
         if not (d / "run.zarr").exists():
-            r = run_slip_in_place(d, c, noise=noise, overrides=[f"sensor={sensor}"])
+            shutil.rmtree(d, ignore_errors=True)
+            try:
+                r = run_slip_in_place(d, c, noise=noise, overrides=[f"sensor={sensor}"])
+            except Exception as exc:  # noqa: BLE001 - a condition the plan check refuses: said, skipped
+                print(json.dumps({"run": c.name, "status": "refused", "error": str(exc)}), file=sys.stderr)
+                continue
             if r.status != "success":
                 print(json.dumps({"run": c.name, "status": r.status, "error": r.error}), file=sys.stderr)
                 continue
         yield c, d / "run.zarr"
 
 
-def evaluate(store: Path, cfg):
-    """(truth row, slip estimate of the matched contact segment) of one run, analysed with the
-    sensor model it was recorded with."""
+def evaluate(store: Path, model, cfg):
+    """(truth row of score.json's object_motions, the slip estimate it was scored on)."""
     from tactile_flow.analysis.load import load_run, open_truth
     from tactile_flow.analysis.pipeline import analyse
     from tactile_flow.analysis.score import score
-    a = analyse(load_run(store), cfg)
+    run = load_run(store)
+    a = analyse(run, cfg, model if model is not None and model.sensor is run.sensor else None)   # the store's model
     sc = score(a, open_truth(store))
-    row = sc.get("object_motions", [{}])[0]
-    est = a.slips.get(row.get("segment"))
-    return row, est
+    row = (sc.get("object_motions") or [{}])[0]
+    return row, a.slips.get(row.get("segment"))
 
 
-def source_values(est: dict, source: str):
-    """(direction deg or None, magnitude mm or None, rotation deg or None) of one evidence source."""
+def true_label(c, bins=None) -> str:
+    """The truth in the confusion matrix's terms (a translation binned to ``bins`` if given)."""
+    if c.motion == "translate":
+        d = c.direction_deg if bins is None else min(bins, key=lambda b: angle_error(c.direction_deg, b))
+        return f"translate {d % 360:.0f}°"
+    if c.motion == "rotate":
+        return "rotate ccw" if c.rotation_deg > 0 else "rotate cw"
+    return "touch"
+
+
+def read_label(slip_class, direction, rotation, bins) -> str:
+    """What an estimate says, in the confusion matrix's terms (a translation binned to ``bins``)."""
+    if slip_class == "translation" and direction is not None:
+        nearest = min(bins, key=lambda b: angle_error(direction, b))
+        return f"translate {nearest % 360:.0f}°"
+    if slip_class == "rotation" and rotation:
+        return "rotate ccw" if rotation > 0 else "rotate cw"
+    if slip_class == "none":
+        return "touch"
+    return "undecided"
+
+
+def source_direction(est, source):
     ev = est["evidence"].get(source) or {}
     v = ev.get("vector_mm")
-    direction = mag = None
-    if v is not None and any(v):
-        s = SIGN.get(source, 1.0)
-        direction = math.degrees(math.atan2(s * v[1], s * v[0]))
-        mag = math.hypot(*v)
-    return direction, mag, ev.get("rotation_deg")
-
-
-def best_threshold_accuracy(values, is_slip) -> float | None:
-    """Fraction right of 'slip if value ≥ t' at the best t (an upper bound of one fitted threshold)."""
-    pairs = [(v, s) for v, s in zip(values, is_slip) if v is not None]
-    if not pairs:
+    if not v or not any(v):
         return None
-    vals = sorted({v for v, _ in pairs})
-    cuts = [vals[0] - 1.0] + [(a + b) / 2 for a, b in zip(vals, vals[1:])] + [vals[-1] + 1.0]
-    return max(np.mean([(v >= t) == s for v, s in pairs]) for t in cuts)
+    s = SIGN.get(source, 1.0)
+    return math.degrees(math.atan2(s * v[1], s * v[0]))
 
 
-def summarise(rows) -> dict:
-    """Accuracy per source and combined over ``rows`` = [(condition, truth row, estimate)]."""
-    out = {}
-    for source in SOURCES:
-        dirs, rots, mags, slips = [], [], [], []
+def source_rotation(est, source):
+    rot = est["evidence"].get("rotation") or {}
+    key = {"rotation_mean": "rotation_deg", "rotation_dynamic": "dynamic_deg", "rotation_static": "static_deg",
+           "rotation_turn": "pattern_turn_deg"}[source]
+    return rot.get(key)
+
+
+def reread(est, cfg, rotation_source=None, direction_source=None):
+    """The shipped decision with one evidence source in place of the shipped one."""
+    from tactile_flow.analysis.slip import classify
+    if est is None or est.get("slip_class") is None:
+        return None, None, None
+    rot_ev = dict(est["evidence"]["rotation"])
+    if rotation_source:
+        rot_ev["rotation_deg"] = source_rotation(est, rotation_source)
+    motion = est["evidence"]["motion"]
+    cls, _ = classify(motion["displacement_mm"], rot_ev, motion["radius_mm"], est.get("direction_agreement"), cfg)
+    direction = source_direction(est, direction_source) if direction_source else est["slip_direction_sensor_deg"]
+    return cls, direction, rot_ev.get("rotation_deg")
+
+
+def summarise(rows, cfg, bins) -> dict:
+    """Rates per true class of the shipped estimate and of each source in its place."""
+    out = {"runs": len(rows)}
+    variants = {"shipped": {}}
+    variants.update({f"direction:{s}": {"direction_source": s} for s in DIRECTION_SOURCES})
+    variants.update({f"rotation:{s}": {"rotation_source": s} for s in ROTATION_SOURCES})
+    for name, kw in variants.items():
+        right = defaultdict(list)
         for c, tr, est in rows:
-            if est is None:
-                continue
-            d, m, r = source_values(est, source)
-            if c.motion == "translate":
-                dirs.append(d is not None and angle_error(d, tr["true_direction_sensor_deg"]) <= 45.0)
-            if c.motion == "rotate" and r is not None:
-                rots.append(r != 0 and math.copysign(1, r) == math.copysign(1, tr["true_rotation_deg"]))
-            mags.append(m)
-            slips.append(c.motion != "none")
-        out[source] = {"direction": float(np.mean(dirs)) if dirs else None,
-                       "rotation_sense": float(np.mean(rots)) if rots else None,
-                       "touch_vs_slip_best_threshold": best_threshold_accuracy(mags, slips)}
-    found = [tr.get("contact_found", False) for _, tr, _ in rows]
-    comb = defaultdict(list)
-    for c, tr, est in rows:
-        if c.motion == "translate":
-            comb["direction"].append(bool(tr.get("direction_correct")))
-        if c.motion == "rotate":
-            comb["rotation_sense"].append(bool(tr.get("rotation_sense_correct")))
-        comb["touch_vs_slip"].append(bool(tr.get("touch_vs_slip_correct")))
-        comb["class"].append(bool(tr.get("class_correct")))
-    out["combined"] = {k: float(np.mean(v)) for k, v in comb.items()}
-    out["combined"]["contact_found"] = float(np.mean(found)) if found else None
-    out["runs"] = len(rows)
+            cls, direction, rotation = reread(est, cfg.slip, **kw)
+            truth = true_label(c, bins)
+            got = read_label(cls, direction, rotation, bins)
+            right[c.motion].append(got == truth if c.motion != "translate" else
+                                   (cls == "translation" and direction is not None
+                                    and angle_error(direction, c.direction_deg) <= 45.0))
+            right["touch_vs_slip"].append((cls == "none") == (c.motion == "none"))
+            if c.motion == "rotate":
+                right["rotation_sense"].append(bool(rotation) and rotation * c.rotation_deg > 0)
+                right["rotation_recognised"].append(cls == "rotation")
+        out[name] = {k: float(np.mean(v)) for k, v in right.items()}
+    errs = [1e3 * (est["slip_onset_s"] - tr["true_slip_onset_s"]) for c, tr, est in rows
+            if c.motion != "none" and est and est.get("slip_onset_s") is not None
+            and tr.get("true_slip_onset_s") is not None and math.isfinite(tr["true_slip_onset_s"])]
+    slips = sum(c.motion != "none" for c, *_ in rows)
+    out["onset"] = {"slips": slips, "dated": len(errs),
+                    "within_50ms": (float(np.sum(np.abs(errs) <= 50.0)) / slips) if slips else None,
+                    "median_ms": float(np.median(errs)) if errs else None,
+                    "abs_q90_ms": float(np.percentile(np.abs(errs), 90)) if errs else None}
     return out
 
 
-def real_contact_rate() -> dict:
-    """Rows of the real grasp frames (tests/data) found in contact on at least one finger, against
-    a baseline pooled over each file and the real resting sensors' noise (as the tests do)."""
-    import csv
+def confusion(rows, cfg, bins) -> tuple[list[str], Counter]:
+    labels = [f"translate {b % 360:.0f}°" for b in bins] + ["rotate ccw", "rotate cw", "touch"]
+    counts = Counter()
+    for c, tr, est in rows:
+        cls, direction, rotation = reread(est, cfg.slip)
+        counts[(true_label(c, bins), read_label(cls, direction, rotation, bins))] += 1
+    return labels, counts
 
-    from tactile_flow.analysis.preprocess import despike
-    from tactile_flow.importers import read_bag, select_fingers
-    from tactile_flow.tactile import contact, signals
-    data = ROOT / "tests" / "data"
-    rec, _ = select_fingers(read_bag(data / "biotac_rest_untouched.bag"))
-    z = signals.counts_to_impedance(rec.electrodes.astype(float))
-    base = z.mean(axis=0)
-    smooth = base + signals.kalman_smooth(despike(z - base, 5), R=0.005, Q=0.00015)
-    noise = contact.residual_noise(np.log(z), np.log(smooth))
-    found = total = 0
-    for path in sorted((data / "biotac_sp_grasps").glob("*.csv")):
-        with open(path) as f:
-            rows = np.array([[float(x) for x in r[2:]] for r in list(csv.reader(f))[1:]]).reshape(-1, 3, 24)
-        rows = np.clip(rows, 1, 4094)
-        ch = contact.relative_change(signals.counts_to_impedance(rows),
-                                     signals.counts_to_impedance(np.percentile(rows, 95, axis=0)))
-        score = contact.contact_score(ch, noise).max(axis=1)
-        found += int((score > 6.0).sum())
-        total += len(rows)
-    rest_max = float(contact.contact_score(contact.relative_change(smooth, base), noise).max())
-    return {"real_grasp_rows": total, "found_in_contact": found, "rate": found / total,
-            "real_resting_recording_max_score": rest_max}
+
+def markdown_confusion(labels, counts) -> str:
+    cols = labels + ["undecided"]
+    lines = ["| true \\ read | " + " | ".join(cols) + " | right |", "| --- " * (len(cols) + 2) + "|"]
+    for t in labels:
+        n = sum(counts[(t, r)] for r in cols)
+        if not n:
+            continue
+        lines.append(f"| {t} | " + " | ".join(str(counts[(t, r)] or "·") for r in cols)
+                     + f" | {counts[(t, t)]}/{n} |")
+    return "\n".join(lines)
+
+
+def real_touch(out: Path, per_finger: int) -> dict:
+    """Records of real contact frames held still, read as touch (``tests/real_touch.py``)."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    import real_touch as rt
+    work = out / "real_touch"
+    shutil.rmtree(work, ignore_errors=True)
+    dirs = rt.write_records(work / "csv", per_finger)
+    result = {}
+    for kind, ds in dirs.items():
+        read = Counter()
+        for d in ds:
+            for row in rt.read_as_touch(d, work / "imported" / kind, rt.BASELINE[kind]):
+                read[(row["slip"] or {}).get("slip_class") or "no estimate"] += 1
+        n = sum(read.values())
+        result[kind] = {"records": n, "read_as": dict(read), "touch_rate": read["none"] / n if n else None}
+    return result
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path(os.environ.get("TMPDIR", "/tmp")) / "bench_slip_direction")
+    ap.add_argument("--grid", choices=("classic", "varied"), default="classic")
     ap.add_argument("--noise", type=float, nargs="+", default=[1.0])
-    ap.add_argument("--quick", action="store_true", help="flat object and light force only")
+    ap.add_argument("--real-touch", type=int, default=6, help="real contact frames per finger and grasp file (0: none)")
+    ap.add_argument("--quick", action="store_true", help="every fourth condition")
     ap.add_argument("--sensor", nargs="+", default=["biotac_sp", "biotac"],
                     help="sensor models (conf/sensor/): the BioTac SP and the classic BioTac by default")
     args = ap.parse_args(argv)
-    from tactile_flow.analysis.config import load_config
-    cfg = load_config({"figures": False, "progress": False})
-    totals = {}
     for sensor in args.sensor:
-        t0 = time.perf_counter()
-        everything = []
-        for noise in args.noise:
-            cells = defaultdict(list)
-            for c, store in runs(args.out, noise, args.quick, sensor):
-                tr, est = evaluate(store, cfg)
-                cells[(c.press_force, c.surface, c.tare)].append((c, tr, est))
-                everything.append((noise, c, tr, est))
-            for (force, surface, tare), rows in sorted(cells.items()):
-                print(json.dumps({"sensor": sensor, "noise": noise, "force_n": force, "object": surface, "tare": tare,
-                                  **summarise(rows)}))
-        totals[sensor] = total = summarise([(c, tr, est) for _, c, tr, est in everything])
-        print(json.dumps({"sensor": sensor, "all": True, **total, "seconds": round(time.perf_counter() - t0, 1)}))
-        for tare in (True, False):
-            print(json.dumps({"sensor": sensor, "tare": tare,
-                              **summarise([(c, tr, e) for _, c, tr, e in everything if c.tare == tare])}))
-    print(json.dumps({"sensor": "biotac_sp", "real_contact_detection": real_contact_rate()}))
+        print(f"\n## sensor {sensor}\n", flush=True)
+        bench(args, sensor)
+
+
+def bench(args, sensor: str) -> None:
+    """The benchmark of :func:`main` with the fingertips of the sensor model ``sensor``."""
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.pipeline import get_model
+    from tactile_flow.protocols.slip_grid import DIRECTIONS_DEG
+    cfg = load_config({"figures": False, "progress": False})
+    model = get_model(cfg.tactile) if sensor == "biotac_sp" else None
+    bins = DIRECTIONS_DEG if args.grid == "classic" else tuple(range(0, 360, 60))
+    t0 = time.perf_counter()
+    everything = []
+    for noise in args.noise:
+        for c, store in runs(args.out, args.grid, noise, args.quick, sensor):
+            tr, est = evaluate(store, model, cfg)
+            everything.append((noise, c, tr, est))
+            print(json.dumps({"sensor": sensor, "run": c.name, "noise": noise, "truth": true_label(c, bins),
+                              "read": read_label(*reread(est, cfg.slip), bins),
+                              "onset_error_ms": None if not est or est.get("slip_onset_s") is None
+                              or not math.isfinite(tr.get("true_slip_onset_s", float("nan")))
+                              else round(1e3 * (est["slip_onset_s"] - tr["true_slip_onset_s"]), 1)}),
+                  flush=True)
+    rows = [(c, tr, est) for _, c, tr, est in everything]
+    cells = defaultdict(list)
+    for c, tr, est in rows:
+        force = "light" if c.press_force < 3.0 else "firm"
+        cells[("tare" if c.tare else "no tare", force)].append((c, tr, est))
+    for (tare, force), cell in sorted(cells.items()):
+        print(json.dumps({"sensor": sensor, "grid": args.grid, "tare": tare, "force": force,
+                          **summarise(cell, cfg, bins)}))
+    total = summarise(rows, cfg, bins)
+    print(json.dumps({"sensor": sensor, "grid": args.grid, "all": True, **total,
+                      "seconds": round(time.perf_counter() - t0, 1)}))
+    touch = real_touch(args.out, args.real_touch) if args.real_touch and sensor == "biotac_sp" else None   # real SPs
+    if touch:
+        print(json.dumps({"real_touch": touch}))
     fmt = lambda v: "–" if v is None else f"{100 * v:.0f} %"  # noqa: E731
-    for sensor, total in totals.items():
-        print(f"\n{sensor}:\n\n| source | direction (≤45°) | rotation sense | touch vs slip |\n| --- | --- | --- | --- |")
-        for source in SOURCES:
-            r = total[source]
-            print(f"| {source} | {fmt(r['direction'])} | {fmt(r['rotation_sense'])} | "
-                  f"{fmt(r['touch_vs_slip_best_threshold'])} (best threshold) |")
-        r = total["combined"]
-        print(f"| combined (shipped) | {fmt(r.get('direction'))} | {fmt(r.get('rotation_sense'))} | "
-              f"{fmt(r.get('touch_vs_slip'))} |")
+    print(f"\n{sensor}, {args.grid} grid, {len(rows)} runs: the shipped estimate\n")
+    print(markdown_confusion(*confusion(rows, cfg, bins)))
+    for (tare, force), cell in sorted(cells.items()):
+        print(f"\n{tare}, {force} ({len(cell)} runs)\n")
+        print(markdown_confusion(*confusion(cell, cfg, bins)))
+    print("\n| evidence in the decision | translations (direction ≤ 45°) | rotations (class and sense) | "
+          "touches | touch vs slip | rotation sense | rotation recognised |\n| --- | --- | --- | --- | --- | --- | --- |")
+    for name, r in total.items():
+        if not isinstance(r, dict) or name == "onset":
+            continue
+        print(f"| {name} | {fmt(r.get('translate'))} | {fmt(r.get('rotate'))} | {fmt(r.get('none'))} | "
+              f"{fmt(r.get('touch_vs_slip'))} | {fmt(r.get('rotation_sense'))} | {fmt(r.get('rotation_recognised'))} |")
+    o = total["onset"]
+    print(f"\nslip onset: {o['dated']} of {o['slips']} slips dated; within 50 ms of the truth: {fmt(o['within_50ms'])}; "
+          f"median error {o['median_ms'] if o['median_ms'] is None else round(o['median_ms'], 1)} ms; "
+          f"90th percentile of |error| {o['abs_q90_ms'] if o['abs_q90_ms'] is None else round(o['abs_q90_ms'], 1)} ms")
+    if touch:
+        for kind, r in touch.items():
+            print(f"real touches ({kind}): {r['records']} records, read as touch {fmt(r['touch_rate'])} ({r['read_as']})")
 
 
 if __name__ == "__main__":

@@ -62,6 +62,9 @@ def test_sweep_labels_estimates_and_score(runs, proto, tmp_path):
     assert set(tree["aggregates"]["view"].values) == {"bottom", "left", "right"}
     assert tree["estimates/crossings"]["width"].attrs["units"] == "mm"
     assert "headline" in summary and summary["headline"]["crossings"] == 3
+    # the pattern's flow in the frames, px/frame: not a speed (docs/analysis.md), and not called one
+    for c in summary["estimates"]["crossings"]:
+        assert 0.01 < c["flow_px_per_frame"] < 1.0 and "flow_speed_mm_s" not in c
 
 
 def test_pour_phases(runs, tmp_path):
@@ -212,3 +215,11 @@ def test_static_flow_only_where_an_estimate_reads_it(runs, tmp_path):
     during = next(s for s in auto["segments"] if s["label"] == "during")
     assert "bottom/static" in during["flow"] and "left/static" not in during["flow"]
     assert "left/dynamic" in during["flow"]
+
+
+def test_sweeps_and_pour_write_only_documented_fields(runs, tmp_path):
+    """Every field of their summary.json is in docs/analysis.md's table (tests/test_summary_fields.py)."""
+    from test_summary_fields import undocumented
+    for proto, store in runs.items():
+        summary = analyze_run(_copy(store, tmp_path, proto), {"progress": False}, console=lambda *a: None)
+        assert undocumented(summary) == [], proto

@@ -1,21 +1,38 @@
-"""The skin under an object that moves against a still finger: stick, stretch, slip, twist.
+"""The skin under an object that moves against a still finger: stick, partial slip, slip, twist.
 
-Pure functions on a small state (:class:`Skin`), sensor frame, mm and N:
+Pure functions on a small state (:class:`Skin`), sensor frame, mm and N. The mechanics are
+those of a compliant elastic contact (Johnson, *Contact Mechanics*, 1985, §7.2–7.4), which
+describe the fingertip's and the BioTac's silicone skin alike at the scale of a contact:
 
 - the skin under the contact sticks to the object and moves with it (``stretch``, mm, in the
-  sensor x–y plane; ``twist``, rad about the sensor's +z), loading the skin elastically with
-  Mindlin's stiffnesses of a contact of radius ``a``: tangential ``k_t = 8·G*·a`` (N/mm),
-  torsional ``k_r = (16/3)·G*·a³`` (N·mm/rad);
-- when the traction ``k_t·|stretch|`` exceeds ``μs·F`` (or the torque ``k_r·|twist|`` exceeds
-  ``(3π/16)·μs·F·a``, a Hertzian patch's torsional capacity) the skin breaks away and slips
-  back to the kinetic level (``μk`` instead of ``μs``); with ``stick_slip`` it sticks again at
-  once and the next pull repeats the cycle (the stick-slip of a pulled object), else it rides
-  at the kinetic level while the object keeps moving;
+  sensor x–y plane; ``twist``, rad about the sensor's +z), loaded with Mindlin's initial
+  stiffnesses of a contact of radius ``a``: tangential ``k_t = 8·G*·a`` (N/mm), torsional
+  ``k_r = (16/3)·G*·a³`` (N·mm/rad);
+- **partial slip** (Cattaneo–Mindlin): slip starts at the contact's edge and its stuck centre
+  shrinks as the pull grows, so the traction grows ever more slowly with the stretch,
+  ``Q(s) = μs·F·[1 − (1 − s/s*)^{3/2}]`` with ``s* = 3μs·F/(2k_t)`` (initial slope k_t), and
+  the whole contact slips — gross slip, the ground truth's ``slip_onset`` — when the stretch
+  reaches ``s*``. The same form is used for the twist, with the torque capacity of a Hertzian
+  patch ``M* = (3π/16)·μs·F·a`` (Lubkin's torsion; Johnson §7.4) and ``θ* = 3M*/(2k_r)``: an
+  approximation that keeps Lubkin's initial stiffness and capacity and its progressive slip
+  from the edge. The finger pad behaves this way: incipient slip begins at the periphery and
+  spreads inwards until the whole contact slides (Tada, Mochimaru & Kanade, EuroHaptics 2006;
+  André et al., J. R. Soc. Interface 2011; Delhaye, Lefèvre & Thonnard, J. R. Soc. Interface
+  11:20140698, 2014), and a tangential torque about the normal lowers the load at which it
+  slips in proportion (Kinoshita et al., J. Neurophysiol. 78:1619, 1997);
+- after gross slip the traction falls to the kinetic level (``μk`` instead of ``μs``): the
+  stretch relaxes to where ``Q = μk·F``; with ``stick_slip`` the skin sticks again at once
+  and the next pull repeats the cycle (the stick-slip of a pulled object), else it rides at
+  the kinetic level while the object keeps moving;
 - what the electrodes see: the pressed skin (and its pressure) carried along by the stretch and
   turned by the twist (:func:`displaced`), plus the traction's loads: ahead of the stretched
-  skin the skin bunches up and loads, behind it relaxes (:func:`hardware.sim.contact.shear_loads`);
-  for a twist every pressed point pushes along its own direction of motion, which for an
-  elongated patch loads two opposite quadrants and unloads the other two (:func:`torsion_loads`).
+  skin the skin bunches up and loads, behind it relaxes (:func:`hardware.sim.contact.shear_loads`;
+  on the BioTac, tangential forces slide the skin over the core and change the impedance of the
+  electrodes towards which it is pushed — SynTouch's force-sensing notes; Wettels et al., Adv.
+  Robotics 22:829, 2008); for a twist every pressed point pushes along its own direction of
+  motion, which for an elongated patch loads two opposite quadrants and unloads the other two
+  (:func:`torsion_loads`): a small, antisymmetric change, the reason shear and torque are hard
+  to tell apart on the BioTac (Lin et al., ICRA 2013).
 """
 
 from __future__ import annotations
@@ -34,8 +51,8 @@ class Skin:
 
     stretch: np.ndarray = field(default_factory=lambda: np.zeros(2))   # mm
     twist: float = 0.0                                                  # rad about +z
-    traction_n: float = 0.0                                             # k_t·|stretch|, N
-    torque_n_mm: float = 0.0                                            # k_r·|twist|, N·mm
+    traction_n: float = 0.0                                             # Q(|stretch|): partial-slip traction, N
+    torque_n_mm: float = 0.0                                            # M(|twist|): partial-slip torque, N·mm
     slipping: bool = False                                              # slid in the last step
     twisting: bool = False                                              # turned against friction in the last step
 
@@ -52,31 +69,52 @@ def stiffness(radius_mm: float, shear_modulus: float) -> tuple[float, float]:
     return 8.0 * shear_modulus * a, 16.0 / 3.0 * shear_modulus * a ** 3
 
 
+def breakaway(capacity: float, stiffness_: float) -> float:
+    """Stretch (or twist) at gross slip of a Cattaneo–Mindlin contact: ``3·capacity / (2·stiffness)``."""
+    return 1.5 * capacity / stiffness_
+
+
+def partial_slip_load(s: float, capacity: float, stiffness_: float) -> float:
+    """Traction (or torque) of a contact stretched (twisted) by ``s`` ≥ 0 before gross slip:
+    ``capacity·[1 − (1 − s/s*)^{3/2}]``, initial slope ``stiffness_``; ``capacity`` at and beyond s*."""
+    x = min(abs(s) / breakaway(capacity, stiffness_), 1.0) if capacity > 0 else 1.0
+    return capacity * (1.0 - (1.0 - x) ** 1.5)
+
+
+def relaxed(capacity_static: float, capacity_kinetic: float, stiffness_: float) -> float:
+    """The stretch (twist) at which the partial-slip traction equals ``capacity_kinetic``: where
+    the skin settles after gross slip (on the loading curve of ``capacity_static``)."""
+    ratio = min(max(capacity_kinetic / capacity_static, 0.0), 1.0) if capacity_static > 0 else 0.0
+    return breakaway(capacity_static, stiffness_) * (1.0 - (1.0 - ratio) ** (2.0 / 3.0))
+
+
 def step(skin: Skin, move_mm, turn_rad: float, force_n: float, radius_mm: float, mu_s: float, mu_k: float,
          shear_modulus: float, stick_slip: bool = True) -> bool:
     """Advance ``skin`` by the object's motion at the contact since the last step: ``move_mm``
-    (2,) and ``turn_rad``. Returns whether the skin broke away (slid or turned) in this step."""
+    (2,) and ``turn_rad``. Returns whether the skin broke away (gross slip, sliding or turning)
+    in this step (module docstring: partial slip up to it, the kinetic level after it)."""
     if force_n <= 0:
         skin.relax()
         return False
     kt, kr = stiffness(radius_mm, shear_modulus)
+    cap_s, cap_k = mu_s * force_n, mu_k * force_n
     move = np.asarray(move_mm, float)
     riding = not stick_slip and skin.slipping and float(np.hypot(*move)) > 0
     s = skin.stretch + move
     n = float(np.hypot(*s))
-    skin.slipping = riding or kt * n > mu_s * force_n
+    skin.slipping = riding or n >= breakaway(cap_s, kt)
     if skin.slipping and n > 0:
-        s = s / n * (mu_k * force_n / kt)
+        s = s / n * relaxed(cap_s, cap_k, kt)
     skin.stretch = s
-    skin.traction_n = kt * float(np.hypot(*s))
+    skin.traction_n = partial_slip_load(float(np.hypot(*s)), cap_s, kt)
     riding = not stick_slip and skin.twisting and turn_rad != 0
     w = skin.twist + turn_rad
     cap = TORSION_CAPACITY * force_n * radius_mm
-    skin.twisting = riding or kr * abs(w) > mu_s * cap
+    skin.twisting = riding or abs(w) >= breakaway(mu_s * cap, kr)
     if skin.twisting:
-        w = math.copysign(mu_k * cap / kr, w)
+        w = math.copysign(relaxed(mu_s * cap, mu_k * cap, kr), w)
     skin.twist = w
-    skin.torque_n_mm = kr * abs(w)
+    skin.torque_n_mm = partial_slip_load(w, mu_s * cap, kr)
     return skin.slipping or skin.twisting
 
 

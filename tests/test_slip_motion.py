@@ -1,0 +1,92 @@
+"""The slip estimate's pure parts: the pattern's motion from its first settled frames
+(``analysis.slip_motion``), the slip onset's knee (``analysis.slip_onset``) and the headline's
+circular statistics (``analysis.headline``)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from tactile_flow.analysis.headline import circular_mean_deg
+from tactile_flow.analysis.slip_motion import pattern_motion, turn_deg
+from tactile_flow.analysis.slip_onset import knee
+from tactile_flow.tactile.geometry import load_taxels
+
+TAXELS = load_taxels()
+
+
+def blob(centre, sigma=(4.0, 2.0), angle_deg=0.0, load=5.0, taxels=TAXELS):
+    """(n,) activation kΩ of an elliptical Gaussian contact at ``centre`` (x, y) mm, its long axis
+    ``angle_deg`` from +x (counter-clockwise about +z)."""
+    a = math.radians(angle_deg)
+    r = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+    d = (taxels[:, :2] - np.asarray(centre)) @ r.T
+    return load * np.exp(-0.5 * ((d[:, 0] / sigma[0]) ** 2 + (d[:, 1] / sigma[1]) ** 2))
+
+
+def record(frames):
+    return np.stack(frames)
+
+
+def test_a_shifted_pattern_moves_a_pressed_harder_one_does_not():
+    still = record([blob((2.0, 1.0))] * 10 + [blob((2.0, 1.0), load=5.0 * (1 + 0.1 * i)) for i in range(30)])
+    pm = pattern_motion(still, TAXELS, 0, len(still), 10)
+    assert np.abs(pm.displacement).max() < 1e-9 and np.abs(pm.turn_deg).max() < 1e-6
+    assert pm.change.max() < 1e-9
+    moved = record([blob((2.0, 1.0))] * 10 + [blob((2.0 + 0.1 * i, 1.0)) for i in range(30)])
+    pm = pattern_motion(moved, TAXELS, 0, len(moved), 10)
+    d = pm.displacement[-1]
+    assert d[0] > 1.0 and abs(d[1]) < 0.3 * d[0]                   # along +x, by most of the 2.9 mm
+    assert pm.change[-1] > 10 * max(pm.change_noise, 1e-6)
+
+
+@pytest.mark.parametrize("turn", [10.0, -10.0])
+def test_an_elongated_pattern_turned_reads_its_sense(turn):
+    """+ rotation_deg is counter-clockwise seen from outside the pad: about the sensor's −z, i.e.
+    a negative angle about +z in the sensor's x–y coordinates."""
+    frames = record([blob((0.0, 0.0))] * 10 + [blob((0.0, 0.0), angle_deg=-turn * i / 20) for i in range(1, 21)])
+    pm = pattern_motion(frames, TAXELS, 0, len(frames), 10)
+    assert np.sign(pm.turn_deg[-1]) == np.sign(turn)
+    assert np.hypot(*pm.displacement[-1]) < 0.3
+    assert pm.elongation > 0.2
+
+
+def test_the_turn_of_second_moments_is_exact_for_a_small_rotation():
+    m = np.array([[9.0, 1.0], [1.0, 3.0]])
+    th = math.radians(2.0)
+    r = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+    turned, elongation = turn_deg((r @ m @ r.T)[None], m)
+    assert turned[0] == pytest.approx(-2.0, abs=0.05)             # +2° about +z is −2° in rotation_deg
+    assert 0 < elongation < 1
+
+
+def test_nothing_pressed_is_no_motion():
+    assert pattern_motion(np.zeros((30, len(TAXELS))), TAXELS, 0, 30, 10) is None
+
+
+def test_the_knee_is_where_the_skin_stops_following():
+    rng = np.random.default_rng(0)
+    t = np.arange(250)
+    y = 3.0 * np.clip((t - 60) / 40, 0, 1) + 0.0005 * np.clip(t - 100, 0, None) + rng.normal(0, 0.02, len(t))
+    k = knee(y)
+    assert abs(k.motion - 60) <= 2 and abs(k.slip - 100) <= 2 and k.slowed
+    assert k.slip_lo <= k.slip <= k.slip_hi and k.slip_hi - k.slip_lo <= 8
+
+
+def test_a_contact_that_slides_at_once_slips_when_it_starts_moving():
+    t = np.arange(200)
+    k = knee(0.02 * np.clip(t - 50, 0, None))
+    assert not k.slowed and abs(k.slip - 50) <= 1
+
+
+def test_a_flat_or_short_signal_has_no_knee():
+    assert knee(np.zeros(100)) is None and knee(np.arange(5.0)) is None
+
+
+def test_circular_mean_of_two_headings_is_not_their_vector_mean():
+    assert circular_mean_deg([179.0, -179.0])[0] == pytest.approx(180.0, abs=1e-6) or \
+        circular_mean_deg([179.0, -179.0])[0] == pytest.approx(-180.0, abs=1e-6)
+    mean, spread = circular_mean_deg([10.0, 10.0, 10.0])
+    assert mean == pytest.approx(10.0) and spread == pytest.approx(0.0, abs=1e-6)
+    assert circular_mean_deg([0.0, 180.0]) == (None, None)          # opposite: no mean direction
+    assert circular_mean_deg([]) == (None, None)
