@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import csv
 import glob
+import io
 import os
 import re
 import sys
@@ -38,6 +39,10 @@ from tactile_flow.cliapp.runner import signals_received
 from tactile_flow.cliapp.sensors import composed_sensor
 from tactile_flow.validation import ConfigError
 from tactile_flow.conf import DIR as CONF_DIR
+from tactile_flow.runstore import files
+from tactile_flow.runstore.analyses import AnalysisNameTaken
+from tactile_flow.runstore.paths import PathOutsideRoot
+from tactile_flow.runstore.rundir import RunDirBusy
 
 from .config import AnalysisConfigError
 from .load import AnalysisInputError
@@ -83,12 +88,14 @@ def table_dir(spec: str) -> Path:
 
 
 def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
-                  table: bool = True, sensor=None) -> tuple[int, list[dict]]:
-    """Analyse the run stores ``spec`` names (:func:`find_stores`); never raises. The exit
-    code and one row per run (``run``, ``result``, then the summary's ``headline``); with
-    ``table`` and several runs, their table is written (:func:`table_dir`). ``sensor``: the
-    :class:`tactile.sensor.SensorModel` asked for (``sensor=``); a store recorded with another
-    is refused (bad input), the others analysed."""
+                  table: bool = True, name: str | None = None, force: bool = False,
+                  sensor=None) -> tuple[int, list[dict]]:
+    """Analyse the run stores ``spec`` names (:func:`find_stores`) into analyses called ``name``
+    (default: their key, :func:`analysis.run.default_name`); never raises. The exit code and
+    one row per run (``run``, ``analysis`` (its name), ``result``, then the summary's
+    ``headline``); with ``table`` and several runs, their table is written (:func:`table_dir`).
+    ``sensor``: the :class:`tactile.sensor.SensorModel` asked for (``sensor=``); a store
+    recorded with another is refused (bad input), the others analysed."""
     from .run import analyze_run
     stores = find_stores(spec) if spec else []
     if not stores:
@@ -97,27 +104,37 @@ def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
         return BAD_INPUT, []
     code, rows = 0, []
     for store in stores:
-        row = {"run": str(store)}
+        row = {"run": str(store), "analysis": name or ""}
         rows.append(row)
         try:
-            summary = analyze_run(store, analysis_cfg, console=console, sensor=sensor)
+            summary = analyze_run(store, analysis_cfg, name=name, force=force, console=console, sensor=sensor)
+            row["analysis"] = summary.get("analysis") or row["analysis"]
             row["result"] = "analysed"
             row.update(summary.get("headline", {}))
-        except (AnalysisInputError, ConfigError) as exc:
-            _report(exc, "error", verbose)
+        except (AnalysisInputError, ConfigError, PathOutsideRoot, RunDirBusy, AnalysisNameTaken) as exc:
+            _report(exc, "error", verbose)   # bad input: a planted link, a name, a directory in use, another sensor
             row["result"] = f"error: {exc}"
             code = max(code, BAD_INPUT)
         except Exception as exc:  # noqa: BLE001 - one line per failed run, keep going
             if signals_received():  # a Ctrl-C cut a library's code short and its cleanup raised this
+                _quiet_after_interrupt()
                 return _interrupted(store, rows)
             _report(exc, f"analysis of {store} failed", verbose)
             row["result"] = f"failed: {type(exc).__name__}: {exc}"
             code = max(code, FAILED)
         except KeyboardInterrupt:  # Ctrl-C or SIGTERM: stop here; the analysis leaves no partial files
+            _quiet_after_interrupt()
             return _interrupted(store, rows)
     if table and len(stores) > 1:
         write_table(table_dir(spec), rows)
     return code, rows
+
+
+def _quiet_after_interrupt() -> None:
+    """An interrupt inside zarr's event loop leaves coroutines never awaited; their
+    ``RuntimeWarning`` at collection would add lines under the one that says what happened."""
+    import warnings
+    warnings.filterwarnings("ignore", message=r"coroutine .* was never awaited", category=RuntimeWarning)
 
 
 def _interrupted(store: Path, rows: list[dict]) -> tuple[int, list[dict]]:
@@ -133,19 +150,24 @@ def _report(exc: Exception, what: str, verbose: bool) -> None:
 
 
 def write_table(root: Path, rows: list[dict]) -> None:
-    """``analysis_summary.csv`` and ``analysis_summary.md`` in ``root``."""
+    """``analysis_summary.csv`` and ``analysis_summary.md`` in ``root`` (never through a link:
+    :mod:`runstore.files`): one row per analysis, nested values (the per-finger ``slip``) as
+    columns of their own (``slip.ff.slip_class``...), never a dict printed as text."""
+    from tactile_flow.runstore.runinfo import flatten
+    rows = [flatten(r) for r in rows]
     columns = list(dict.fromkeys(k for r in rows for k in r))
-    with open(root / "analysis_summary.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=columns)
-        w.writeheader()
-        w.writerows(rows)
+    text = io.StringIO()
+    w = csv.DictWriter(text, fieldnames=columns)
+    w.writeheader()
+    w.writerows(rows)
+    files.write_text(root, "analysis_summary.csv", text.getvalue())
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     for r in rows:
         cells = [f"{r.get(c):.4g}" if isinstance(r.get(c), float) else str(r.get(c, "")).replace("|", "\\|")
                  for c in columns]
         lines.append("| " + " | ".join(cells) + " |")
-    (root / "analysis_summary.md").write_text("\n".join(lines) + "\n")
-    print(f"summary of {len(rows)} runs: {root / 'analysis_summary.md'}")
+    files.write_text(root, "analysis_summary.md", "\n".join(lines) + "\n")
+    print(f"summary of {len(rows)} analyses: {root / 'analysis_summary.md'}")
 
 
 class SummaryTable(jobresults.SweepResults):
@@ -155,8 +177,11 @@ class SummaryTable(jobresults.SweepResults):
 
     def summarise(self, config, results: list[dict]) -> None:
         rows = []
+        swept = _swept(results)
         for r in results:
-            rows += r["rows"]
+            params = {k: v for k, v in _params(r["overrides"]).items() if k in swept}
+            rows += [{"run": row["run"], **params, **{k: v for k, v in row.items() if k != "run"}}
+                     for row in r["rows"]]
             reported = {row["run"] for row in r["rows"]}
             why = (f"failed: its job ({r['job']}) left no result" if r["code"] is None
                    else f"not analysed: its job ({r['job']}) stopped before it")
@@ -166,6 +191,23 @@ class SummaryTable(jobresults.SweepResults):
                  for run in run_specs(config.hydra.overrides.task) if run not in reported]
         if rows:
             write_table(Path(config.hydra.sweep.dir), rows)
+
+
+def _params(overrides) -> dict:
+    """A job's overrides as ``{key: value}``, ``run=`` and ``batch=`` left out."""
+    out = {}
+    for o in overrides or []:
+        key, _, value = str(o).partition("=")
+        if key.lstrip("+~") not in ("run", "batch", "verbose"):
+            out[key.lstrip("+~")] = value
+    return out
+
+
+def _swept(results: list[dict]) -> list[str]:
+    """The override keys whose value differs between the sweep's jobs (a column each)."""
+    params = [_params(r["overrides"]) for r in results]
+    keys = list(dict.fromkeys(k for p in params for k in p))
+    return [k for k in keys if len({p.get(k) for p in params}) > 1]
 
 
 @hydra.main(config_path=str(CONF_DIR), config_name="analyze", version_base=None)
@@ -185,7 +227,9 @@ def _app(cfg) -> None:
         return
     code, rows = 0, []
     for spec in (run if OmegaConf.is_list(run) else [run]):
-        c, r = analyse_paths(str(spec), cfg.analysis, bool(cfg.get("verbose")), table=not sweep, sensor=sensor)
+        c, r = analyse_paths(str(spec), cfg.analysis, bool(cfg.get("verbose")), table=not sweep,
+                             name=None if cfg.get("name") is None else str(cfg.name), force=bool(cfg.get("force")),
+                             sensor=sensor)
         code, rows = max(code, c), rows + r
         if c == INTERRUPTED:
             break

@@ -1,4 +1,5 @@
-"""Labelled results: the ``analysis.zarr`` tree, ``summary.json`` and their atomic replacement.
+"""Labelled results: the ``analysis.zarr`` tree and the JSON of ``summary.json`` (where they go:
+:mod:`runstore.analyses`).
 
 Layout of ``analysis.zarr`` (beside ``run.zarr``; docs/analysis.md):
 
@@ -20,10 +21,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
-import uuid
-from pathlib import Path
 
 import numpy as np
 
@@ -201,56 +198,5 @@ def slip_dataset(a: Analysis) -> Dataset:
                 "rotation_source": np.array(["static_onset", "dynamic"], dtype=str)})
 
 
-def atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
-    with open(tmp, "w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
 def dumps(obj) -> str:
     return json.dumps(_clean(obj), indent=2, sort_keys=False, allow_nan=False) + "\n"
-
-
-OUTPUTS = ("analysis.zarr", "summary.json", "score.json", "figures")
-
-
-def swap_in(staging: Path, run_dir: Path, history_record: dict | None) -> None:
-    """Replace the run directory's analysis outputs by those in ``staging``.
-
-    ``summary.json`` is the commit mark: the previous one is moved aside first and the new
-    one renamed into place last, so a run directory holds a ``summary.json`` only beside the
-    outputs of that same analysis (every output carries its ``analysis_id``); a kill in
-    between leaves outputs without a mark, an analysis that ``protocols.resume.analysis_state``
-    calls incomplete. Each output is renamed into place (atomic per output; the previous one
-    is moved aside and deleted after). ``history_record`` (the previous analysis's config and
-    provenance) is appended to ``analysis_history.jsonl``.
-    """
-    trash = run_dir / f".analysis-old-{uuid.uuid4().hex[:8]}"
-    trash.mkdir()
-    try:
-        if history_record is not None:
-            with open(run_dir / "analysis_history.jsonl", "a") as f:
-                f.write(json.dumps(_clean(history_record), sort_keys=True) + "\n")
-        if (run_dir / "summary.json").exists():
-            os.replace(run_dir / "summary.json", trash / "summary.json")
-        for name in [o for o in OUTPUTS if o != "summary.json"] + ["summary.json"]:
-            new, old = staging / name, run_dir / name
-            if old.exists():
-                os.replace(old, trash / name)
-            if new.exists():
-                os.replace(new, old)
-    finally:
-        shutil.rmtree(trash, ignore_errors=True)
-        shutil.rmtree(staging, ignore_errors=True)
-
-
-def remove_debris(run_dir: Path) -> list[str]:
-    """Remove what killed analyses left in ``run_dir`` (``.analysis-staging-*``,
-    ``.analysis-old-*``); returns their names. Call with the run directory locked."""
-    found = sorted(p for pattern in (".analysis-staging-*", ".analysis-old-*") for p in run_dir.glob(pattern))
-    for p in found:
-        shutil.rmtree(p, ignore_errors=True)
-    return [p.name for p in found]

@@ -30,6 +30,7 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import OmegaConf
 
+from tactile_flow.runstore import files
 from tactile_flow.runstore.status import ExitCode
 
 from .runner import error_line, run_app, signals_received
@@ -135,8 +136,7 @@ def _job(hc) -> dict:
 
 
 def _write(directory: Path, result: dict) -> None:
-    """``directory/job_result.json``, whole or not at all (written aside, then renamed)."""
+    """``directory/job_result.json``, whole or not at all, never through a link
+    (:func:`runstore.files.write_text`: written aside, then renamed)."""
     directory.mkdir(parents=True, exist_ok=True)
-    tmp = directory / f".{RESULT_FILE}.{os.getpid()}"
-    tmp.write_text(json.dumps(result, default=str) + "\n")
-    os.replace(tmp, directory / RESULT_FILE)
+    files.write_text(directory, RESULT_FILE, json.dumps(result, default=str) + "\n", fsync=False)

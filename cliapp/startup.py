@@ -38,3 +38,15 @@ def tactile_recover() -> None:
     end_at_once_on_signals()
     from tactile_flow.runstore.recover import command
     command()
+
+
+def tactile_runs() -> None:
+    """The ``tactile-runs`` entry point (its module is in ``runstore``): signals end it at once
+    until it has parsed its arguments and takes them over."""
+    end_at_once_on_signals()
+    import signal
+    from tactile_flow.runstore.runs_cli import command
+    for s in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(s) == end_at_once:
+            signal.signal(s, signal.default_int_handler)
+    command()

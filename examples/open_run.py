@@ -7,7 +7,8 @@ Both stores are zarr v3 groups that xarray opens as one ``DataTree`` each
 This example prints the run's steps (from ``run.zarr`` ``/events``) and its segments with their
 slip estimates (``analysis.zarr`` ``/segments`` and ``/estimates/slip``), and saves one figure:
 a finger's pressure (PDC above its tare, from ``run.zarr`` ``/biotac``) with the segments as
-bands and the slip displacement of each segment (default ``RUN_DIR/open_run.png``).
+bands and the slip displacement of each segment (default ``open_run.png`` in the current directory:
+nothing is written into the run directory).
 
 xarray gotcha: ``tree["events"].name`` is the *group's* name (``"events"``), not the events'
 ``name`` variable; read variables from the group's dataset, ``tree["events"].to_dataset()["name"]``.
@@ -28,10 +29,17 @@ import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
 
+def analysis_dir(run_dir: Path) -> Path:
+    """The run's current analysis: ``RUN/analysis/`` (every analysis is kept in
+    ``RUN/analyses/<name>/``; ``tactile-runs show RUN`` lists them), or the run directory
+    itself for a run analysed before tactile-flow 0.2."""
+    return run_dir / "analysis" if (run_dir / "analysis" / "analysis.zarr").is_dir() else run_dir
+
+
 def open_stores(run_dir: Path) -> tuple[xr.DataTree, xr.DataTree]:
-    """The run's recording and its analysis, each as a DataTree (lazy: arrays load on access)."""
+    """The run's recording and its current analysis, each as a DataTree (lazy: arrays load on access)."""
     return (xr.open_datatree(run_dir / "run.zarr", engine="zarr"),
-            xr.open_datatree(run_dir / "analysis.zarr", engine="zarr"))
+            xr.open_datatree(analysis_dir(run_dir) / "analysis.zarr", engine="zarr"))
 
 
 def steps(run: xr.DataTree) -> list[tuple[str, float, float]]:
@@ -100,12 +108,12 @@ def plot(t, p, rows, finger: str, title: str, out: Path) -> None:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("run_dir", type=Path, help="a run directory holding run.zarr and analysis.zarr")
+    parser.add_argument("run_dir", type=Path, help="a run directory holding run.zarr and an analysis")
     parser.add_argument("--finger", default=None, help="the finger to plot (default: the protocol's)")
-    parser.add_argument("--out", type=Path, default=None, help="PNG to write (default RUN_DIR/open_run.png)")
+    parser.add_argument("--out", type=Path, default=None, help="PNG to write (default open_run.png here)")
     args = parser.parse_args(argv)
-    if not (args.run_dir / "run.zarr").is_dir() or not (args.run_dir / "analysis.zarr").is_dir():
-        print(f"error: {args.run_dir} holds no run.zarr and analysis.zarr (analyse it with "
+    if not (args.run_dir / "run.zarr").is_dir() or not (analysis_dir(args.run_dir) / "analysis.zarr").is_dir():
+        print(f"error: {args.run_dir} holds no run.zarr and analysis (analyse it with "
               f"tactile-analyze run={args.run_dir}/run.zarr)", file=sys.stderr)
         return 2
     run, analysis = open_stores(args.run_dir)
@@ -124,7 +132,7 @@ def main(argv=None) -> int:
                                                    f"{r['direction']:.2f} deg")
         print(f"segment {r['id']} {r['finger']} {r['label']}: {r['start']:.4f}-{r['end']:.4f} s{slip}")
     t, p = pressure(run, finger)
-    out = args.out or args.run_dir / "open_run.png"
+    out = args.out or Path("open_run.png")
     plot(t, p, rows, finger, f"{run.attrs['protocol']}, {finger}", out)
     print(f"figure {out}")
     return 0

@@ -326,6 +326,9 @@ def publish(pairs: list[tuple[Path, Path]]) -> None:
         for staging, target in reversed(done):
             os.rename(target, staging)
         raise
+    from tactile_flow.runstore.catalogue import register_quietly
+    for _, target in pairs:                       # the run catalogue (tactile-runs list) knows them
+        register_quietly(target)
 
 
 def discard(paths) -> None:

@@ -12,6 +12,7 @@ Errors are one line naming the key at fault; ``verbose=true`` adds the traceback
 from __future__ import annotations
 
 import csv
+import io
 import json
 import logging
 import sys
@@ -20,12 +21,13 @@ from pathlib import Path
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
+from hydra.types import RunMode
 from omegaconf import OmegaConf
 
 import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import report
 from tactile_flow.conf import DIR as CONF_DIR
-from tactile_flow.runstore import RunStatus, rundir
+from tactile_flow.runstore import RunStatus, analyses, files, paths, rundir, runinfo
 
 from .interrupts import Interrupts
 from .schema import check_targets, register
@@ -72,12 +74,20 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
     from . import resume  # the run store, the simulator, numba: not for --help
     from .run import RunResult, hand_off, run_protocol
     try:
+        check_run_dir(cfg, hc, run_dir)
         check_targets(cfg)
         _refuse_parallel_hardware(cfg, hc)
         decision = "run"
         if cfg.resume and not cfg.plan_only:
+            config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
+            if hc.mode == RunMode.MULTIRUN:
+                resume.check_job_siblings(hc.sweep.dir, hc.job.num, run_dir, config_yaml)
             with interrupts.during("writing"):        # an earlier attempt may be moved aside
-                decision = resume.decide(run_dir, OmegaConf.to_yaml(cfg, resolve=True), analyze=cfg.analyze)
+                decision = resume.decide(run_dir, config_yaml, analyze=cfg.analyze)
+        if decision == "run" and not cfg.plan_only:
+            with interrupts.during("writing"):
+                record_config(run_dir, cfg)
+            log.info("tactile-run %s", " ".join(hc.overrides.task))     # the log's first line (opens it)
         if decision == "skip":
             console(f"run {run_dir}: skipped (succeeded before with the same config and code)")
             return 0
@@ -121,6 +131,28 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
     return code
 
 
+def check_run_dir(cfg, hc, run_dir: Path) -> None:
+    """Before anything is written in ``run_dir``: the protocol's name is a plain name, a sweep's
+    job directory is inside the sweep directory (:mod:`runstore.paths`), and, unless resuming,
+    the directory holds no run (a finished run's record is never rewritten). ``ValueError``."""
+    paths.component(cfg.protocol.name, "protocol.name")
+    if hc.mode == RunMode.MULTIRUN:
+        paths.within(hc.sweep.dir, run_dir, "hydra.sweep.subdir")
+    if not cfg.resume:
+        rundir.refuse_finished(run_dir)
+
+
+def record_config(run_dir: Path, cfg) -> None:
+    """Hydra's record of the job in ``run_dir/.hydra/``: ``config.yaml`` (the job's config),
+    ``hydra.yaml`` and ``overrides.yaml``, as Hydra writes them (``hydra.output_subdir`` is
+    null: the run writes them itself, after its checks, never over a finished run's;
+    :mod:`runstore.files`)."""
+    hydra_cfg = HydraConfig.instance().cfg
+    for name, node in (("config.yaml", cfg), ("hydra.yaml", hydra_cfg),
+                       ("overrides.yaml", hydra_cfg.hydra.overrides.task)):
+        files.write_text(run_dir, f".hydra/{name}", OmegaConf.to_yaml(node), record=True)
+
+
 def _report(cfg, exc: Exception, what: str) -> None:
     report(exc, what, bool(cfg.get("verbose")))
     log.error(f"{what}: {exc}", exc_info=exc)
@@ -156,6 +188,7 @@ def main() -> None:
         print(listing(CONF_DIR))
         sys.exit(0)
     register()
+    paths.register_resolvers()               # ${tf_name:...} in the run directories' names
     logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
     _interrupts.install()                    # the run owns Ctrl-C and SIGTERM (protocols.interrupts)
     # protocols are data: no Hydra settings, no code; a sweep's exit status is its highest job's
@@ -166,19 +199,30 @@ class RunDirLock(Callback):
     """One run directory, one writer: lock ``hydra.run.dir`` (``hydra.sweep.dir`` with ``-m``)
     before Hydra writes anything there (:mod:`runstore.rundir`); a second ``tactile-run``
     on the same directory is refused with one line, exit 2, leaving the first one's files alone.
-    A job that recorded nothing (``plan_only``, a bad config, a failed connection) leaves no
-    directory (:func:`runstore.rundir.remove_if_unused`; with ``-m`` once the sweep has read
-    its jobs' results, in the process that started it)."""
+    Before that, the directory is checked: inside the root its template starts with
+    (``outputs/``, :mod:`runstore.paths`), whatever ``protocol.name`` holds, and not a
+    finished run's (unless ``resume=true``). A job that recorded nothing (``plan_only``, a bad
+    config, a failed connection) leaves no directory (:func:`runstore.rundir.remove_if_unused`;
+    with ``-m`` once the sweep has read its jobs' results, in the process that started it)."""
 
     def on_run_start(self, config, **kwargs) -> None:
-        self._take(config.hydra.run.dir)
+        directory = self._checked(config, "run")
+        self._take(directory)                  # a run still recording there: "in use by another process"
+        if not config.get("resume"):
+            self._refuse(rundir.refuse_finished, directory)
+
+    def on_job_end(self, config, **kwargs) -> None:
+        rundir.retire_run_logs()           # the next job's first lines never reach this run's log
 
     def on_run_end(self, config, **kwargs) -> None:
         rundir.release(config.hydra.run.dir)
         rundir.remove_if_unused(config.hydra.run.dir)      # nothing ran: no empty run directory
 
     def on_multirun_start(self, config, **kwargs) -> None:
-        self._take(config.hydra.sweep.dir)
+        directory = self._checked(config, "sweep")
+        self._take(directory)
+        if not config.get("resume"):
+            self._refuse(_refuse_finished_sweep, directory)
 
     def on_multirun_end(self, config, **kwargs) -> None:
         for job in Path(config.hydra.sweep.dir).iterdir():
@@ -187,21 +231,49 @@ class RunDirLock(Callback):
         rundir.release(config.hydra.sweep.dir)
         rundir.remove_if_unused(config.hydra.sweep.dir)
 
+    @classmethod
+    def _checked(cls, config, kind: str) -> str:
+        """``hydra.<kind>.dir``, refused if it leaves the root its template starts with, or if the
+        protocol's name is not a plain name (its directory name is made safe either way)."""
+        template = OmegaConf.to_container(config.hydra[kind], resolve=False)["dir"]
+        directory = str(config.hydra[kind].dir)
+        cls._refuse(paths.within, paths.template_root(str(template)), directory, f"hydra.{kind}.dir")
+        if OmegaConf.select(config, "protocol.name", default=None) is not None:
+            cls._refuse(paths.component, config.protocol.name, "protocol.name")
+        return directory
+
+    @classmethod
+    def _take(cls, directory) -> None:
+        cls._refuse(rundir.acquire, directory)
+
     @staticmethod
-    def _take(directory) -> None:
+    def _refuse(check, *args) -> None:
+        """``check(*args)``; a ``ValueError`` is one line and exit 2 (Hydra would turn a
+        callback's exception into a warning and go on)."""
         try:
-            rundir.acquire(directory)
-        except rundir.RunDirBusy as exc:
+            check(*args)
+        except ValueError as exc:
             print(f"error: {exc}", file=sys.stderr)
-            raise SystemExit(BAD_INPUT) from None      # Hydra turns a callback's exceptions into warnings
+            raise SystemExit(BAD_INPUT) from None
+
+
+def _refuse_finished_sweep(directory) -> None:
+    """A sweep directory whose jobs hold runs is refused unless the sweep is resumed."""
+    done = sorted(p.parent.name for p in Path(directory).glob("*/run.json"))
+    if done:
+        raise rundir.RunFinished(f"hydra.sweep.dir {directory} holds the runs of an earlier sweep "
+                                 f"({', '.join(done[:3])}{', ...' if len(done) > 3 else ''}); their records are never "
+                                 f"rewritten: resume it with the same command and resume=true, or choose another "
+                                 f"hydra.sweep.dir")
 
 
 class SweepSummary(jobresults.SweepResults):
-    """At the end of a multirun, one table of every job that ran: overrides, status, headline
-    results, from the job directories on disk (any launcher).
+    """At the end of a multirun, one table of every job that ran: a column per swept
+    parameter, status, headline results, from the job directories on disk (any launcher);
+    and a figure of each headline metric against each swept parameter (:mod:`.sweepfig`).
 
-    Written to ``summary.csv`` and ``summary.md`` at the sweep's root directory; the sweep's
-    exit status is its highest job's (:mod:`cliapp.jobresults`).
+    Written to ``summary.csv``, ``summary.md`` and ``sweep.png`` at the sweep's root
+    directory; the sweep's exit status is its highest job's (:mod:`cliapp.jobresults`).
     """
 
     def summarise(self, config, results: list[dict]) -> None:
@@ -209,30 +281,60 @@ class SweepSummary(jobresults.SweepResults):
         rows = sweep_rows(root)
         if rows:
             write_summary(root, rows)
+            figure = ""
+            try:
+                from .sweepfig import sweep_figure
+                figure = ", sweep.png" if sweep_figure(root, rows, swept_columns(rows)) else ""
+            except Exception as exc:      # noqa: BLE001 - the table is the record; the figure a view of it
+                log.warning(f"sweep figure not drawn: {type(exc).__name__}: {exc}")
             unanalysed = sum(r["status"] == "success" and r["analysis"] != "complete" for r in rows) \
                 if config.get("analyze") else 0
             print(f"sweep {root}: {len(rows)} runs, {sum(r['status'] == 'success' for r in rows)} succeeded"
                   + (f", {unanalysed} of them not (completely) analysed" if unanalysed else "")
-                  + "; summary.md, summary.csv")
+                  + f"; summary.md, summary.csv{figure}")
+
+
+#: overrides that say how a sweep is shown, not what it varies
+QUIET_OVERRIDES = ("progress", "verbose", "resume", "analyze", "analysis.progress", "analysis.figures")
 
 
 def sweep_rows(root: Path) -> list[dict]:
-    """One row per job directory under ``root`` that holds a ``run.json``."""
+    """One row per job directory under ``root`` that holds a ``run.json``: ``job``, a column per
+    override (its key, ``protocol.sweep_speed``; :func:`swept_columns` says which vary),
+    ``status``, ``run_id``, ``error``, ``analysis`` (state), ``analysis_name`` and the
+    headline of its current analysis (``result.*``; a per-finger ``slip`` as
+    ``result.slip.<finger>.<field>`` columns)."""
     from . import resume
     rows = []
     for run_json in sorted(root.glob("*/run.json"), key=lambda p: _job_number(p.parent.name)):
         job = run_json.parent
         info = json.loads(run_json.read_text())
         overrides_file = job / ".hydra" / "overrides.yaml"
-        overrides = OmegaConf.load(overrides_file) if overrides_file.exists() else []
-        row = {"job": job.name, "overrides": " ".join(overrides), "status": info.get("status"),
-               "run_id": info.get("run_id"), "error": info.get("error") or "",
-               "analysis": resume.analysis_state(job)}
-        if row["analysis"] == "complete":                # results only from a whole analysis
-            row.update({f"result.{k}": v for k, v in json.loads((job / "summary.json").read_text())
-                        .get("headline", {}).items()})
+        overrides = OmegaConf.load(overrides_file) if overrides_file.exists() else info.get("overrides") or []
+        row = {"job": job.name}
+        for o in overrides:
+            key, _, value = str(o).partition("=")
+            if key.lstrip("+~") not in QUIET_OVERRIDES:
+                row[key.lstrip("+~")] = value
+        row.update({"status": info.get("status"), "run_id": info.get("run_id"), "error": info.get("error") or "",
+                    "analysis": resume.analysis_state(job)})
+        current = analyses.current_dir(job)
+        if current is not None:                          # results only from a whole analysis
+            row["analysis_name"] = analyses.current_name(job)
+            headline = json.loads((current / analyses.SUMMARY).read_text()).get("headline", {})
+            row.update({f"result.{k}": v for k, v in runinfo.flatten(headline).items()})
         rows.append(row)
     return rows
+
+
+def swept_columns(rows: list[dict]) -> list[str]:
+    """The override columns whose value differs between the rows (every override column of a
+    one-job sweep): the sweep's parameters."""
+    fixed = {"job", "status", "run_id", "error", "analysis", "analysis_name"}
+    keys = [k for k in dict.fromkeys(k for r in rows for k in r) if k not in fixed and not k.startswith("result.")]
+    if len(rows) == 1:
+        return keys
+    return [k for k in keys if len({str(r.get(k)) for r in rows}) > 1]
 
 
 def _job_number(name: str) -> int:
@@ -241,14 +343,23 @@ def _job_number(name: str) -> int:
 
 
 def write_summary(root: Path, rows: list[dict]) -> None:
-    columns = list(dict.fromkeys(k for r in rows for k in r))
-    with open(root / "summary.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=columns)
-        writer.writeheader()
-        writer.writerows(rows)
+    """``summary.csv`` and ``summary.md`` at the sweep's root (never through a link): the job,
+    a column per swept parameter, then status and results (overrides common to every job are
+    left out of the columns: they are in each job's ``.hydra/overrides.yaml``)."""
+    swept = swept_columns(rows)
+    fixed_overrides = {k for r in rows for k in r} - set(swept) - {"job", "status", "run_id", "error", "analysis",
+                                                                    "analysis_name"}
+    columns = ["job", *swept] + [k for k in dict.fromkeys(k for r in rows for k in r)
+                                 if k not in swept and k != "job" and
+                                 (k.startswith("result.") or k not in fixed_overrides)]
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=columns, extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(rows)
+    files.write_text(root, "summary.csv", text.getvalue())
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     lines += ["| " + " | ".join(_cell(r.get(c, "")) for c in columns) + " |" for r in rows]
-    (root / "summary.md").write_text("\n".join(lines) + "\n")
+    files.write_text(root, "summary.md", "\n".join(lines) + "\n")
 
 
 def _cell(value) -> str:

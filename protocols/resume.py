@@ -13,15 +13,16 @@ from __future__ import annotations
 
 import difflib
 import json
-import shutil
+import os
 from pathlib import Path
 
 import yaml
 
+from tactile_flow.runstore import analyses, files
 from tactile_flow.runstore.provenance import git_state
 
 IGNORED_KEYS = ("resume", "progress", "verbose")
-KEPT = (".hydra", "previous", ".tactile.lock")     # never set aside: Hydra's record, earlier attempts, the lock
+KEPT = ("previous", ".tactile.lock", "job_result.json")   # never set aside: earlier attempts, the lock, the job's mark
 
 
 class ResumeMismatch(ValueError):
@@ -50,12 +51,7 @@ def decide(run_dir, config_yaml: str, git: dict | None = None, analyze: bool = F
     if info.get("status") != "success":
         _set_aside(run_dir)
         return "run"
-    before, now = comparable_config(info.get("config_yaml", "")), comparable_config(config_yaml)
-    if before != now:
-        diff = "".join(difflib.unified_diff(before.splitlines(True), now.splitlines(True),
-                                            "recorded run", "this job", n=1))
-        raise ResumeMismatch(f"resume: {run_dir} was run with another config; refusing to mix them in one "
-                             f"sweep:\n{diff}")
+    check_same_config(run_dir, info, config_yaml)
     git = git_state() if git is None else git
     recorded = info.get("git", {})
     for key in ("commit", "diff_sha256"):
@@ -65,36 +61,41 @@ def decide(run_dir, config_yaml: str, git: dict | None = None, analyze: bool = F
     return "analyse" if analyze and analysis_state(run_dir) != "complete" else "skip"
 
 
-def analysis_state(run_dir) -> str:
-    """``complete``, ``missing`` or ``incomplete``: the state of a run directory's analysis.
+def check_same_config(run_dir: Path, info: dict, config_yaml: str) -> None:
+    """:class:`ResumeMismatch` showing the difference if the run recorded in ``run_dir``
+    (``info``: its ``run.json``) was run with another config than ``config_yaml``."""
+    before, now = comparable_config(info.get("config_yaml", "")), comparable_config(config_yaml)
+    if before != now:
+        diff = "".join(difflib.unified_diff(before.splitlines(True), now.splitlines(True),
+                                            "recorded run", "this job", n=1))
+        raise ResumeMismatch(f"resume: {run_dir} was run with another config; refusing to mix them in one "
+                             f"sweep:\n{diff}")
 
-    ``summary.json`` is the analysis's commit mark (written last, removed first when an
-    analysis replaces another: ``analysis.results.swap_in``), and ``analysis.zarr`` and
-    ``score.json`` carry the same ``analysis_id``; outputs without the mark, or with other
-    ids, are an analysis killed half-way."""
-    run_dir = Path(run_dir)
-    summary = run_dir / "summary.json"
-    if not summary.exists():
-        partial = any((run_dir / name).exists() for name in ("analysis.zarr", "score.json"))
-        return "incomplete" if partial else "missing"
-    ids = []
-    try:
-        ids.append(json.loads(summary.read_text())["analysis_id"])
-        ids.append(json.loads((run_dir / "analysis.zarr" / "zarr.json").read_text())["attributes"]["analysis_id"])
-        if (run_dir / "score.json").exists():
-            ids.append(json.loads((run_dir / "score.json").read_text())["analysis_id"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return "incomplete"
-    return "complete" if len(set(ids)) == 1 else "incomplete"
+
+def check_job_siblings(sweep_dir, job_num: int, run_dir, config_yaml: str) -> None:
+    """A resumed sweep whose job ``job_num`` now has another directory name (run directories are
+    named by their overrides) must not add a run of another config beside the earlier one:
+    :class:`ResumeMismatch` if a ``<job_num>_*`` directory holds a run of another config."""
+    for sibling in sorted(Path(sweep_dir).glob(f"{job_num}_*")):
+        if sibling != Path(run_dir) and (sibling / "run.json").is_file():
+            check_same_config(sibling, json.loads((sibling / "run.json").read_text()), config_yaml)
+
+
+def analysis_state(run_dir) -> str:
+    """``complete``, ``missing`` or ``incomplete``: the state of a run directory's analysis
+    (:func:`runstore.analyses.state`: complete when it has a current analysis, each analysis
+    being made aside and renamed into place whole; incomplete: only the outputs of an analysis
+    killed half-way, in the layout before 0.2)."""
+    return analyses.state(run_dir)
 
 
 def _set_aside(run_dir: Path) -> None:
-    """Move an earlier, unsuccessful attempt's files to ``previous/<n>/``."""
-    leftovers = [p for p in run_dir.glob("*") if p.name not in KEPT and not p.name.endswith(".log")]
+    """Move an earlier, unsuccessful attempt's files (its ``.hydra/`` record and log too) to
+    ``previous/<n>/`` (made without following a link: :mod:`runstore.files`)."""
+    leftovers = [p for p in run_dir.iterdir() if p.name not in KEPT]
     if not leftovers:
         return
-    n = len(list((run_dir / "previous").glob("*"))) if (run_dir / "previous").exists() else 0
-    target = run_dir / "previous" / str(n)
-    target.mkdir(parents=True)
+    n = len(list((run_dir / "previous").iterdir())) if (run_dir / "previous").is_dir() else 0
+    target = files.make_dirs(run_dir, f"previous/{n}")
     for p in leftovers:
-        shutil.move(str(p), target / p.name)
+        os.rename(p, target / p.name)            # the entry itself (a link stays a link), same file system

@@ -7,6 +7,8 @@ point with the path of the run store: ``protocols`` never imports ``analysis``.
 
 from __future__ import annotations
 
+import json
+import os
 import sys
 from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
@@ -20,9 +22,12 @@ from tactile_flow.cliapp.heap import long_lived_frozen
 from tactile_flow.hardware.errors import ConfigError
 from tactile_flow.tactile.frames import DEFAULT_VIEWS
 from tactile_flow.runstore import RunStore, provenance, rundir, utc_now
+from tactile_flow.runstore.catalogue import register_quietly
+from tactile_flow.runstore.checksum import store_checksum
 from tactile_flow.tactile import warmup
 from tactile_flow.tactile.pipeline import TactileModel
 
+from . import record
 from .calibration import session_baseline, store_baseline
 from .engine import FAILED, Outcome, RunEngine
 from .interrupts import Interrupts
@@ -79,6 +84,7 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
         prov = provenance.collect(OmegaConf.to_yaml(cfg, resolve=True), list(overrides), lab.identities(),
                                   _calibration(lab), cfg.hardware.get("seed"), protocol=plan.protocol)
         with interrupts.during("writing"):          # from the store's creation to run.json: no signal raises
+            prov.update(_reproducible(run_dir, cfg))
             store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers, sensor=sensor,
                                     run_id=prov["run_id"], provenance=provenance.summary(prov),
                                     attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
@@ -110,7 +116,26 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
                 if screen:
                     screen.close()
                 outcome, stats = _close(run_dir, prov, recorder, monitor, lab, outcome)
+    register_quietly(run_dir, console)            # tactile-runs list finds it (its analysis updates it)
     return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)
+
+
+def _reproducible(run_dir: Path, cfg) -> dict:
+    """What the run keeps to be done again from its directory alone (:mod:`.record`): copies of
+    its config files and of the files its values name, the code's state and uncommitted diff,
+    the working directory, and the run it reproduces (``tactile-runs reproduce`` says so in
+    :data:`runstore.provenance.REPRODUCES_ENV`)."""
+    out = {"code": record.record_code(run_dir), "cwd": os.getcwd()}
+    inputs = record.record_inputs(run_dir, cfg)
+    if inputs is not None:
+        out["inputs"] = inputs
+    reproduces = os.environ.get(provenance.REPRODUCES_ENV)
+    if reproduces:
+        try:
+            out["reproduces"] = json.loads(reproduces)
+        except ValueError:
+            pass
+    return out
 
 
 def _close(run_dir: Path, prov: dict, recorder: Recorder, monitor, lab, outcome: Outcome) -> tuple[Outcome, dict]:
@@ -133,10 +158,15 @@ def _close(run_dir: Path, prov: dict, recorder: Recorder, monitor, lab, outcome:
         problems.append(f"recording failed ({type(cause).__name__}: {cause}); the store keeps every sample "
                         f"committed before that" + ("" if store.closed else " but could not be closed"))
         status = FAILED
+    extra = {"error": "; ".join(problems) or error, "store": store.path.name}
+    if not problems and store.closed:
+        try:                                      # what reproducing the run compares (runstore.checksum)
+            extra["store_checksum"] = store_checksum(store.path)
+        except Exception as exc:                  # noqa: BLE001 - the record matters more than its checksum
+            extra["store_checksum_error"] = f"{type(exc).__name__}: {exc}"
     json_written = False
     try:
-        provenance.write_run_json(run_dir / "run.json", prov, status=status, end_time=utc_now(),
-                                  extra={"error": "; ".join(problems) or error, "store": store.path.name})
+        provenance.write_run_json(run_dir / "run.json", prov, status=status, end_time=utc_now(), extra=extra)
         json_written = True
     except OSError as exc:
         problems.append(f"run.json could not be written ({type(exc).__name__}: {exc})")

@@ -17,7 +17,15 @@ module                 holds
 :mod:`.provenance`     what ran, from which code, on which machine; ``run.json``
 :mod:`.status`         :class:`RunStatus` and the commands' :class:`ExitCode`
 :mod:`.jsonvalues`     JSON-clean attribute values, the UTC time stamp
-:mod:`.rundir`         one run directory, one writer (a lock)
+:mod:`.rundir`         one run directory, one writer (a lock); a finished run refused
+:mod:`.paths`          paths made from input kept inside their root
+:mod:`.files`          the one way a run directory's files are written (no links)
+:mod:`.analyses`       every analysis kept in ``analyses/<name>``, one current
+:mod:`.checksum`       a store's checksum: every array's values
+:mod:`.runinfo`        a run's record as one flat row
+:mod:`.catalogue`      the run catalogue (SQLite, WAL) behind ``tactile-runs``
+:mod:`.reproduce`      ``tactile-runs reproduce``
+:mod:`.runs_cli`       ``tactile-runs list|show|diff|reproduce|index``
 =====================  ===========================================================
 """
 

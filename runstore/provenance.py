@@ -11,19 +11,20 @@ from __future__ import annotations
 import hashlib
 import importlib.metadata
 import json
-import os
 import platform
 import socket
 import subprocess
 import sys
-import tempfile
 import uuid
 from pathlib import Path
 
+from . import files
 from .jsonvalues import jsonable, utc_now
 from .layout import SCHEMA_VERSION
 
 UNKNOWN = "unknown"
+#: set by ``tactile-runs reproduce`` for the run it starts: JSON naming the run reproduced
+REPRODUCES_ENV = "TACTILE_REPRODUCES"
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -47,6 +48,86 @@ def git_state(root: Path = PROJECT_ROOT, paths: tuple[str, ...] = ()) -> dict:
         return {"commit": UNKNOWN, "dirty": UNKNOWN, "diff_sha256": UNKNOWN, "untracked_files": UNKNOWN}
     return {"commit": commit, "dirty": bool(diff), "diff_sha256": hashlib.sha256(diff).hexdigest(),
             "untracked_files": len(untracked)}
+
+
+#: the project's code, as folders of the checkout (what a run's code.diff covers)
+CODE_PATHS = ("tactile_flow", "tactile", "hardware", "runstore", "protocols", "analysis", "importers", "cliapp",
+              "viewer", "validation", "conf", "pyproject.toml")
+CODE_DIFF = "code.diff"
+MAX_UNTRACKED_BYTES = 1 << 20          # an untracked file larger than this is named, not kept in code.diff
+
+
+def code_state(root: Path = PROJECT_ROOT, paths: tuple[str, ...] = CODE_PATHS) -> tuple[dict, bytes]:
+    """The code that runs, and its uncommitted changes as a patch ``git apply`` restores.
+
+    Returns ``({"package", "commit", "dirty", "diff_sha256", "untracked_left_out"}, patch)``:
+    the patch is ``git diff HEAD --binary`` of ``paths`` followed by every untracked (not
+    ignored) file under ``paths`` as a new file (files over :data:`MAX_UNTRACKED_BYTES` are
+    named in ``untracked_left_out`` instead); ``diff_sha256`` is its SHA-256 (None when the
+    tree is clean). Outside a git checkout: ``commit`` ``"unknown"``, an empty patch."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        pkg = version("tactile-flow")
+    except PackageNotFoundError:
+        pkg = UNKNOWN
+    try:
+        top = Path(_git(root, "rev-parse", "--show-toplevel").decode().strip()).resolve()
+        if top != root.resolve():
+            raise ValueError(f"{root} is inside {top}, not a checkout of this project")
+        commit = _git(root, "rev-parse", "HEAD").decode().strip()
+        patch = _git(root, "diff", "HEAD", "--binary", "--", *paths)
+        untracked = [u for u in _git(root, "ls-files", "--others", "--exclude-standard", "-z", "--", *paths)
+                     .decode().split("\0") if u]
+    except (OSError, subprocess.SubprocessError, ValueError):
+        from tactile_flow import build_info          # an installed wheel: the commit it was built from
+        built = build_info() if root == PROJECT_ROOT else {}
+        if built.get("from") == "build":
+            return {"package": pkg, "commit": built.get("commit", UNKNOWN), "dirty": built.get("dirty", UNKNOWN),
+                    "diff_sha256": None if built.get("dirty") is False else UNKNOWN, "untracked_left_out": [],
+                    "from": "build"}, b""
+        return {"package": pkg, "commit": UNKNOWN, "dirty": UNKNOWN, "diff_sha256": UNKNOWN,
+                "untracked_left_out": []}, b""
+    left_out = []
+    for rel in sorted(untracked):
+        if (root / rel).stat().st_size > MAX_UNTRACKED_BYTES:
+            left_out.append(rel)
+            continue
+        new = subprocess.run(["git", "-C", str(root), "diff", "--no-index", "--binary", "--", "/dev/null", rel],
+                             capture_output=True, timeout=20)
+        patch += new.stdout
+    return {"package": pkg, "commit": commit, "dirty": bool(patch),
+            "diff_sha256": hashlib.sha256(patch).hexdigest() if patch else None,
+            "untracked_left_out": left_out}, patch
+
+
+#: the libraries whose versions can change an analysis's numbers (part of its key)
+ANALYSIS_LIBRARIES = ("numpy", "scipy", "opencv-contrib-python-headless", "numba", "zarr", "numcodecs")
+
+
+def code_identity(paths: tuple[str, ...], libraries: tuple[str, ...] = ANALYSIS_LIBRARIES,
+                  root: Path = PROJECT_ROOT) -> dict:
+    """What code decides a computation's result: the package's version, the git trees of
+    ``paths`` at HEAD (so a commit elsewhere in the project changes nothing) with the SHA-256
+    of their uncommitted diff and their untracked files, and ``libraries``' versions. Outside
+    a git checkout, the package version and the libraries."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    def ver(name: str) -> str:
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return UNKNOWN
+    out = {"package": ver("tactile-flow"), "libraries": {n: ver(n) for n in libraries}}
+    state = git_state(root, paths)
+    if state["commit"] != UNKNOWN:
+        try:
+            trees = _git(root, "rev-parse", *(f"HEAD:{p}" for p in paths)).decode().split()
+        except (OSError, subprocess.SubprocessError):
+            trees = [UNKNOWN] * len(paths)
+        out["trees"] = dict(zip(paths, trees))
+        out["diff_sha256"] = state["diff_sha256"] if state["dirty"] else None
+        out["untracked_files"] = state["untracked_files"]
+    return out
 
 
 def package_versions() -> dict[str, str]:
@@ -113,30 +194,12 @@ def summary(provenance: dict) -> dict:
 def write_run_json(path, provenance: dict, status: str, end_time: str | None = None,
                    extra: dict | None = None) -> Path:
     """Write ``provenance`` plus ``status``, ``end_time`` (default: now) and ``extra`` (e.g. the
-    error) as JSON to ``path`` (a file, or a directory to hold ``run.json``), atomically: a
-    temporary file in the same directory, fsynced, then renamed over the target. Returns the
-    file's path."""
+    error) as JSON to ``path`` (a file, or a directory to hold ``run.json``), atomically and
+    never through a link (:func:`runstore.files.write_text`: a temporary file in the same
+    directory, fsynced, then renamed over the target). Returns the file's path."""
     path = Path(path)
     if path.is_dir():
         path = path / "run.json"
     doc = dict(provenance, **(extra or {}), status=status, end_time=end_time or utc_now())
     text = json.dumps(jsonable(doc), indent=2, sort_keys=True, allow_nan=False)
-    fd, tmp = tempfile.mkstemp(prefix=".run.json.", suffix=".partial", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    try:                                # make the rename itself durable
-        dfd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass
-    return path
+    return files.write_text(path.parent, path.name, text + "\n")

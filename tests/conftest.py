@@ -46,9 +46,13 @@ SLOW_TESTS = ("tests/test_geometry.py::test_accurate_geodesic_matches_principal_
 def pytest_configure(config):
     """The signal tests press Ctrl-C as a terminal does. A test run started in the background
     (``pytest &`` in a script, ``nohup``) inherits SIGINT ignored, and so would every program
-    the tests start: give them Python's own handler back."""
+    the tests start: give them Python's own handler back. The runs the tests make register in
+    a catalogue of the test session's own (runstore/catalogue.py), never the user's."""
     if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+    import os
+    import tempfile
+    os.environ["TACTILE_CATALOGUE"] = os.path.join(tempfile.mkdtemp(prefix="tactile-catalogue-"), "runs.sqlite")
 
 
 @pytest.hookimpl(tryfirst=True)              # before `-m` deselects

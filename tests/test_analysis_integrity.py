@@ -1,5 +1,6 @@
 """A killed analysis leaves neither debris nor stale results, and resuming a sweep finishes it
-(issue 13, item 9). Real runs, real ``tactile-analyze``/``tactile-run`` processes, SIGKILL."""
+(issue 13, item 9); every analysis is kept and one is current, whatever moment a kill comes
+(issue 32). Real runs, real ``tactile-analyze``/``tactile-run`` processes, SIGKILL."""
 
 import json
 import os
@@ -14,6 +15,7 @@ import pytest
 
 from tactile_flow.analysis.run import analyze_run
 from tactile_flow.protocols.resume import analysis_state
+from tactile_flow.runstore import analyses
 
 pytestmark = pytest.mark.slow
 RUN = [sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "progress=false"]
@@ -40,17 +42,17 @@ def test_a_killed_analysis_leaves_debris_that_the_next_one_removes(store):
     proc = subprocess.Popen([*ANALYZE, f"run={store}", "analysis.figures=true"], cwd=store.parent,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 240
-    while not list(store.parent.glob(".analysis-staging-*")) and proc.poll() is None:
+    while not list(store.parent.glob("analyses/.staging-*")) and proc.poll() is None:
         assert time.monotonic() < deadline
         time.sleep(0.005)
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=30)
-    assert list(store.parent.glob(".analysis-staging-*")) and analysis_state(store.parent) == "missing"
+    assert list(store.parent.glob("analyses/.staging-*")) and analysis_state(store.parent) == "missing"
 
     lines = []
     analyze_run(store, FAST, console=lines.append)
     assert any("removed what a killed analysis left" in x for x in lines), lines
-    assert not list(store.parent.glob(".analysis-*")) and analysis_state(store.parent) == "complete"
+    assert not list(store.parent.glob("analyses/.staging-*")) and analysis_state(store.parent) == "complete"
 
 
 def _children(pid: int) -> set[int]:
@@ -100,7 +102,7 @@ def test_ctrl_c_while_the_figure_workers_draw_stops_the_analysis_cleanly(store):
     os.killpg(proc.pid, signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 3 and "interrupted" in err, (proc.returncode, err)
-    assert not list(store.parent.glob(".analysis-*")) and analysis_state(store.parent) == "missing"
+    assert not (store.parent / "analyses").exists() and analysis_state(store.parent) == "missing"
     assert not any(_alive(c) for c in workers)
 
 
@@ -174,38 +176,156 @@ def test_a_signal_while_the_figure_workers_fork_waits_for_them_and_never_reaches
     assert noted
 
 
-def test_an_analysis_stopped_between_its_renames_is_incomplete_never_stale(store, monkeypatch):
-    """The previous analysis's ``summary.json`` never stands beside another analysis's outputs:
-    it goes first, the new one comes last (the renames are interrupted after the first)."""
+def whole_current(run_dir: Path) -> str:
+    """The current analysis's name, after checking it is whole and the only one the run's paths
+    show: ``summary.json``, ``analysis.zarr`` and ``score.json`` of one analysis (one id),
+    through ``analysis/`` and the paths of the layout before 0.2 alike; every kept analysis
+    whole; nothing half-made visible."""
+    current = analyses.current_dir(run_dir)
+    assert current is not None and analyses.is_complete(current), current
+    summary = json.loads((run_dir / "analysis" / "summary.json").read_text())
+    assert summary == json.loads((run_dir / "summary.json").read_text())
+    zattrs = json.loads((run_dir / "analysis.zarr" / "zarr.json").read_text())["attributes"]
+    assert zattrs["analysis_id"] == summary["analysis_id"] == json.loads((run_dir / "score.json").read_text())["analysis_id"]
+    for kept in analyses.listing(run_dir):
+        assert analyses.is_complete(kept["path"]), kept
+    return analyses.current_name(run_dir)
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_an_analysis_stopped_between_the_steps_of_its_commit_leaves_a_whole_current_analysis(store, monkeypatch,
+                                                                                              force):
+    """Interrupted at each step of its commit (``analysis.json`` written, renamed into
+    ``analyses/``, the pointer changed, the journal), as a new analysis and as a forced
+    replacement of the current one: the current analysis is always whole, the earlier one or
+    the new one, and the next analysis finishes the job."""
     first = analyze_run(store, FAST, console=lambda *a: None)
-    calls, replace = [], os.replace
+    config = FAST if force else {**FAST, "flow": {"method": "dis"}}
+    real_write, real_rename, real_point, real_journal = (analyses.files.write_text, os.rename, analyses._point,
+                                                         analyses._journal)
 
-    def interrupted(src, dst, *args, **kwargs):
-        if any(p.parent.name.startswith(".analysis-") for p in (Path(src), Path(dst))):    # swap_in's renames
-            calls.append(Path(dst).name)
-            if len(calls) == 3:                # the old summary and analysis.zarr moved aside, the new ones not in
-                raise KeyboardInterrupt
-        return replace(src, dst, *args, **kwargs)
-    monkeypatch.setattr(os, "replace", interrupted)         # zarr renames too: only swap_in's are stopped
-    with pytest.raises(KeyboardInterrupt):
-        analyze_run(store, FAST, console=lambda *a: None)
-    monkeypatch.setattr(os, "replace", replace)
-    assert calls == ["summary.json", "analysis.zarr", "analysis.zarr"]
-    assert not (store.parent / "summary.json").exists()
-    assert analysis_state(store.parent) in ("incomplete", "missing")
+    def write(directory, name, *a, **k):
+        if name == analyses.META:
+            raise KeyboardInterrupt
+        return real_write(directory, name, *a, **k)
 
-    second = analyze_run(store, FAST, console=lambda *a: None)
-    assert second["analysis_id"] != first["analysis_id"] and analysis_state(store.parent) == "complete"
+    def rename(src, dst, *a, **k):
+        real_rename(src, dst, *a, **k)
+        if Path(dst).parent.name == analyses.ANALYSES:
+            raise KeyboardInterrupt
+
+    def point(*a):
+        real_point(*a)
+        raise KeyboardInterrupt
+
+    def journal(*a):
+        raise KeyboardInterrupt
+    seen = set()
+    for target, stop in ((analyses.files, ("write_text", write)), (os, ("rename", rename)),
+                         (analyses, ("_point", point)), (analyses, ("_journal", journal))):
+        monkeypatch.setattr(target, *stop)
+        with pytest.raises(KeyboardInterrupt):
+            analyze_run(store, config, force=force, console=lambda *a: None)
+        monkeypatch.undo()
+        seen.add(whole_current(store.parent))
+        assert not list(store.parent.glob("analyses/.staging-*")) or stop[0] != "write_text"
+    assert (first["analysis"] in seen) and (force or len(seen) == 2), seen
+    final = analyze_run(store, config, console=lambda *a: None)
+    assert whole_current(store.parent) == final["analysis"]
+    assert (final["analysis"] == first["analysis"]) == force
 
 
-def test_outputs_of_two_analyses_side_by_side_are_incomplete(store, tmp_path):
-    """What the previous code could leave (a kill between its renames): an old
-    ``summary.json`` beside a new ``analysis.zarr``. The ids tell them apart."""
-    analyze_run(store, FAST, console=lambda *a: None)
-    old_summary = (store.parent / "summary.json").read_text()
-    analyze_run(store, FAST, console=lambda *a: None)
-    (store.parent / "summary.json").write_text(old_summary)
-    assert analysis_state(store.parent) == "incomplete"
+def test_a_run_analysed_before_0_2_reads_as_it_is_and_is_adopted_by_the_next_analysis(store):
+    """The layout before 0.2 (outputs as files in the run directory) reads as the current
+    analysis; the next analysis moves it into analyses/legacy-<id>/ (kept) and goes beside it.
+    Outputs of two analyses side by side (a kill in the old code's renames) are incomplete."""
+    made = analyze_run(store, FAST, console=lambda *a: None)
+    run = store.parent
+    for name in ("summary.json", "analysis.zarr", "score.json", "figures"):      # back to the old layout
+        if os.path.lexists(run / name):
+            os.unlink(run / name)
+    for item in (run / "analyses" / made["analysis"]).iterdir():
+        if item.name != "analysis.json":
+            os.rename(item, run / item.name)
+    shutil.rmtree(run / "analyses")
+    os.unlink(run / "analysis")
+    (run / "analysis_history.jsonl").unlink()
+    assert analyses.state(run) == "complete" and analyses.current_dir(run) == run
+    assert analyses.current_name(run) == "legacy"
+    assert [a["name"] for a in analyses.listing(run)] == ["legacy"]
+
+    dis = analyze_run(store, {**FAST, "flow": {"method": "dis"}}, console=lambda *a: None)
+    kept = {a["name"]: a for a in analyses.listing(run)}
+    assert set(kept) == {f"legacy-{made['analysis_id'][:8]}", dis["analysis"]} and kept[dis["analysis"]]["current"]
+    assert json.loads((run / "analyses" / f"legacy-{made['analysis_id'][:8]}" / "summary.json").read_text())[
+        "analysis_id"] == made["analysis_id"]
+    assert whole_current(run) == dis["analysis"]
+
+    old = run / "old"                                             # two analyses' outputs side by side
+    old.mkdir()
+    for name in ("summary.json", "analysis.zarr", "score.json"):
+        shutil.copytree(run / "analyses" / dis["analysis"] / name, old / name) if name.endswith(".zarr") else \
+            shutil.copy(run / "analyses" / dis["analysis"] / name, old / name)
+    shutil.copy(run / "analyses" / f"legacy-{made['analysis_id'][:8]}" / "summary.json", old / "summary.json")
+    assert analyses.state(old) == "incomplete"
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads /proc (Linux)")
+def test_sigkill_at_any_moment_leaves_the_previous_or_the_new_analysis_whole(store, tmp_path):
+    """``tactile-analyze`` SIGKILLed at moments spread over its life (its length measured once)
+    and at the steps of its commit (the staging directory made, the new analysis renamed into
+    analyses/, the pointer changed): the run shows the earlier analysis or the new one, whole,
+    never a mix; the next analysis removes the debris and the result is the same."""
+    first = analyze_run(store, FAST, console=lambda *a: None)
+    command = [*ANALYZE, "analysis.progress=false", "analysis.figures=true", "analysis.max_segment_figures=2",
+               "analysis.flow.method=dis"]
+
+    def attempt(run: Path, at=None, when=None):
+        proc = subprocess.Popen([*command, f"run={run / 'run.zarr'}"], cwd=tmp_path, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        t0 = time.monotonic()
+        if when is not None:
+            while not when(run) and proc.poll() is None:
+                time.sleep(0.0005)
+        elif at is not None:
+            time.sleep(at)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=60)
+        return time.monotonic() - t0
+
+    runs = []
+
+    def copy(tag):
+        run = tmp_path / f"run-{tag}"
+        shutil.copytree(store.parent, run, symlinks=True, ignore=shutil.ignore_patterns(".tactile.lock"))
+        runs.append(run)
+        return run
+
+    full = copy("full")
+    proc = subprocess.run([*command, f"run={full / 'run.zarr'}"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    took_name = whole_current(full)
+    t0 = time.monotonic()
+    subprocess.run([*command, f"run={copy('timed') / 'run.zarr'}"], cwd=tmp_path, capture_output=True, timeout=300)
+    took = time.monotonic() - t0
+    for i in range(6):
+        attempt(copy(f"at{i}"), at=took * (i + 0.5) / 6)
+    moments = {"staging": lambda r: any(r.glob("analyses/.staging-*")),
+               "renamed": lambda r: (r / "analyses" / took_name).exists(),
+               "pointed": lambda r: os.path.islink(r / "analysis") and os.readlink(r / "analysis").endswith(took_name)}
+    for tag, when in moments.items():
+        attempt(copy(tag), when=when)
+    outcomes = set()
+    for run in runs[2:]:
+        name = whole_current(run)
+        assert name in (first["analysis"], took_name), (run, name)
+        outcomes.add(name)
+        after = analyze_run(run / "run.zarr", {**FAST, "figures": True, "max_segment_figures": 2,
+                                               "flow": {"method": "dis"}}, console=lambda *a: None)
+        assert after["analysis"] == took_name and whole_current(run) == took_name
+        assert not list(run.glob("analyses/.staging-*"))
+    assert outcomes == {first["analysis"], took_name}, outcomes      # the kills fell on both sides of the commit
 
 
 def test_resuming_a_sweep_analyses_a_run_whose_analysis_was_killed(tmp_path):
@@ -215,7 +335,8 @@ def test_resuming_a_sweep_analyses_a_run_whose_analysis_was_killed(tmp_path):
     assert proc.returncode == 0, proc.stderr
     jobs = sorted(p.parent for p in (tmp_path / "sweep").glob("*/run.json"))
     assert [analysis_state(j) for j in jobs] == ["complete", "complete"]
-    (jobs[1] / "summary.json").unlink()                       # as a kill during its analysis leaves it
+    shutil.rmtree(jobs[1] / "analyses")                       # as a kill during its only analysis leaves it
+    (jobs[1] / "analysis").unlink()
     run_id = json.loads((jobs[1] / "run.json").read_text())["run_id"]
 
     proc = subprocess.run([*RUN[:3], *sweep, "progress=false", "resume=true"], cwd=tmp_path, capture_output=True,

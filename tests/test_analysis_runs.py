@@ -50,14 +50,14 @@ def test_sweep_labels_estimates_and_score(runs, proto, tmp_path):
     summary = analyze_run(store, FAST, console=lambda *a: None)
     labels = [s["label"] for s in summary["segments"]]
     assert labels == ["approach"] + ["before", "during", "after"] * 3 + ["lift"]
-    score = json.loads((store.parent / "score.json").read_text())
+    score = json.loads((store.parent / "analysis" / "score.json").read_text())
     s = score["summary"]
     assert s["direction_correct_fraction"] == 1.0
     assert s["direction_world_error_deg_max"] < 30
     assert s["width_error_mm_median"] <= 1.0
     assert s["boundary_error_ms_median"] <= 50
     assert s["texture_angle_error_deg_median"] < 15
-    tree = xr.open_datatree(str(store.parent / "analysis.zarr"), engine="zarr")
+    tree = xr.open_datatree(str(store.parent / "analysis" / "analysis.zarr"), engine="zarr")
     assert tree["segments"].sizes["segment"] == 11
     assert set(tree["aggregates"]["view"].values) == {"bottom", "left", "right"}
     assert tree["estimates/crossings"]["width"].attrs["units"] == "mm"
@@ -72,7 +72,7 @@ def test_pour_phases(runs, tmp_path):
     summary = analyze_run(store, {**FAST, "views": ["bottom"]}, console=lambda *a: None)
     labels = {s["label"] for s in summary["segments"]}
     assert {"pour", "initial_slip", "rotation", "downward", "full_slip"} <= labels
-    score = json.loads((store.parent / "score.json").read_text())
+    score = json.loads((store.parent / "analysis" / "score.json").read_text())
     for phase in ("pour", "initial_slip", "rotation", "downward", "full_slip"):
         assert abs(score["pour"][phase]["error_ms"]) < 150, (phase, score["pour"])
     assert abs(score["summary"]["slip_onset_error_ms"]) <= 100
@@ -81,22 +81,29 @@ def test_pour_phases(runs, tmp_path):
     assert set(summary["estimates"]["pour"]["per_finger"]) == {"ff", "mf", "th"}
 
 
-def test_reanalysis_is_idempotent_and_keeps_history(runs, tmp_path):
+def test_the_same_analysis_is_reused_and_a_forced_one_is_identical_and_keeps_the_old(runs, tmp_path):
+    """Same code, config and store: the kept analysis is reused (nothing computed); force=True
+    computes it again, identical to the bit, and keeps the old one beside it."""
     store = _copy(runs["straws_sweep"], tmp_path, "idem")
     cfg = {"progress": False, "figures": True, "max_segment_figures": 2}
     first = analyze_run(store, cfg, console=lambda *a: None)
-    a1 = xr.open_datatree(str(store.parent / "analysis.zarr"), engine="zarr").load()
-    second = analyze_run(store, cfg, console=lambda *a: None)
-    a2 = xr.open_datatree(str(store.parent / "analysis.zarr"), engine="zarr").load()
+    a1 = xr.open_datatree(str(store.parent / "analysis" / "analysis.zarr"), engine="zarr").load()
+    lines = []
+    again = analyze_run(store, {**cfg, "workers": 1}, console=lines.append)      # workers: not in the key
+    assert again["analysis_id"] == first["analysis_id"] and "reused" in lines[0], lines
+    second = analyze_run(store, cfg, force=True, console=lambda *a: None)
+    a2 = xr.open_datatree(str(store.parent / "analysis" / "analysis.zarr"), engine="zarr").load()
     for group in ("segments", "aggregates", "whole_run", "estimates/crossings"):
         xr.testing.assert_identical(a1[group].to_dataset(), a2[group].to_dataset())
     assert first["estimates"] == second["estimates"] and first["segments"] == second["segments"]
     assert first["provenance"]["input"]["sha256"] == second["provenance"]["input"]["sha256"]
-    assert first["analysis_id"] != second["analysis_id"]
-    history = (store.parent / "analysis_history.jsonl").read_text().splitlines()
-    assert len(history) == 1 and json.loads(history[0])["analysis_id"] == first["analysis_id"]
-    assert sorted(p.name for p in (store.parent / "figures").iterdir())[:2] == ["electrodes.png", "ellipsoid.png"]
-    assert not list(store.parent.glob(".analysis-*"))
+    assert first["analysis_id"] != second["analysis_id"] and first["analysis"] == second["analysis"]
+    kept = sorted(p.name for p in (store.parent / "analyses").iterdir() if not p.name.startswith("."))
+    assert kept == sorted([first["analysis"], f"{first['analysis']}~{first['analysis_id'][:8]}"])
+    history = [json.loads(x) for x in (store.parent / "analysis_history.jsonl").read_text().splitlines()]
+    assert [h["event"] for h in history] == ["made", "reused", "replaced"]
+    assert sorted(p.name for p in (store.parent / "analysis" / "figures").iterdir())[:2] == ["electrodes.png", "ellipsoid.png"]
+    assert not list((store.parent / "analyses").glob(".staging-*"))
 
 
 def test_not_a_run_store(tmp_path):
@@ -148,7 +155,7 @@ def test_missing_groups_no_contact_aborted_and_short_segments(runs, tmp_path):
     s = analyze_run(store, FAST, console=lambda *a: None)
     assert any(x["what"] == "run" and "aborted" in x["reason"] for x in s["skipped"])
     assert s["headline"]["crossings"] == 2
-    assert (store.parent / "summary.json").exists() and (store.parent / "analysis.zarr").exists()
+    assert (store.parent / "analysis" / "summary.json").exists() and (store.parent / "analysis" / "analysis.zarr").exists()
 
     # a plateau level this close to the peak leaves 'during' segments of < 2 frames
     store = _copy(src, tmp_path, "short")
@@ -181,7 +188,7 @@ def test_workers_give_identical_results(runs, tmp_path):
     for workers in (1, 3):
         store = _copy(runs["straws_sweep"], tmp_path, f"w{workers}")
         summary = analyze_run(store, {**FAST, "figures": True, "workers": workers}, console=lambda *a: None)
-        pngs = {p.name: p.read_bytes() for p in (store.parent / "figures").iterdir()}
+        pngs = {p.name: p.read_bytes() for p in (store.parent / "analysis" / "figures").iterdir()}
         results[workers] = json.dumps(_results(summary), sort_keys=True), pngs
     assert len(results[1][1]) == 7 and sorted(json.loads(results[1][0])["figures"]) == sorted(results[1][1])
     assert results[1] == results[3]

@@ -48,7 +48,7 @@ def test_a_corrupt_chunk_is_named(copy):
     corrupt(sorted(p for p in (copy / "biotac" / "electrodes" / "c").rglob("*") if p.is_file())[0])
     proc = subprocess.run([*ANALYZE, f"run={copy}"], capture_output=True, text=True, timeout=300)
     one_line(proc, 2, "biotac/electrodes", "cannot be read", "damaged")
-    assert not (copy.parent / "summary.json").exists()
+    assert not (copy.parent / "analysis" / "summary.json").exists()
 
 
 def test_a_garbage_labels_attribute_is_named(copy):

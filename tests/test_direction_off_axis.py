@@ -25,8 +25,8 @@ def test_a_sweep_at_45_degrees_to_the_finger_reads_within_30_degrees(tmp_path):
                            f"hydra.run.dir={tmp_path / 'run'}"], cwd=tmp_path, capture_output=True, text=True,
                           timeout=600)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    crossings = json.loads((tmp_path / "run" / "summary.json").read_text())["estimates"]["crossings"]
-    truth = json.loads((tmp_path / "run" / "score.json").read_text())["crossings"]
+    crossings = json.loads((tmp_path / "run" / "analysis" / "summary.json").read_text())["estimates"]["crossings"]
+    truth = json.loads((tmp_path / "run" / "analysis" / "score.json").read_text())["crossings"]
     assert len(crossings) == len(truth) == 1
     # the finger moves along +x of the base; the sensor is turned +45° about its z: −45° in its frame
     assert angle_deg(crossings[0]["direction_sensor"], [0.7071, -0.7071, 0.0]) < 30.0

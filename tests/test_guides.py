@@ -123,7 +123,7 @@ def copy_tree(dst: Path) -> Path:
 
 
 def score(run_dir: Path) -> dict:
-    return json.loads((run_dir / "score.json").read_text())
+    return json.loads((run_dir / "analysis" / "score.json").read_text())
 
 
 # ----------------------------------------------------------------------------- README and the links
@@ -210,7 +210,7 @@ def test_the_copied_protocol_runs_and_ends_with_two_lines(there_and_back):
     assert analysis.startswith("analysis ") and analysis.split(": ")[0].endswith(str(run_dir.relative_to(cwd)))
     assert "score: targets met" in analysis
     assert last == f"run {run_dir}: success"
-    summary = json.loads((run_dir / "summary.json").read_text())
+    summary = json.loads((run_dir / "analysis" / "summary.json").read_text())
     assert summary["scheme"] == "sweep" and summary["headline"]["crossings"] == 12      # 4 sweeps × 3 straws
     assert score(run_dir)["all_targets_met"] is True
 
@@ -415,7 +415,7 @@ def test_open_run_example_prints_what_analysis_zarr_holds(there_and_back, tmp_pa
                           capture_output=True, text=True, timeout=300)
     out = ok(proc)
     assert png.stat().st_size > 10_000
-    analysis = xr.open_datatree(run_dir / "analysis.zarr", engine="zarr")
+    analysis = xr.open_datatree(run_dir / "analysis" / "analysis.zarr", engine="zarr")
     seg = analysis["segments"].to_dataset()
     slip = analysis["estimates"]["slip"].to_dataset()
     printed = re.findall(r"^segment (\d+) (\w+) (\w+): ([\d.]+)-([\d.]+) s(?: slip (\w+) ([\d.]+) mm ([-\d.]+) deg)?$",

@@ -43,8 +43,8 @@ def test_a_protocol_of_ones_own_is_scored_on_nothing_it_does_not_declare(tmp_pat
         cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "no target applies" in proc.stdout and "NOT" not in proc.stdout, proc.stdout
-    (run,) = (tmp_path / "outputs").glob("*/*_press_bump")
-    labels = [s["label"] for s in json.loads((run / "summary.json").read_text())["segments"]]
+    (run,) = (tmp_path / "outputs").glob("*/*_press_bump_*")
+    labels = [s["label"] for s in json.loads((run / "analysis" / "summary.json").read_text())["segments"]]
     assert labels == ["approach", "contact", "lift"]
-    score = json.loads((run / "score.json").read_text())
+    score = json.loads((run / "analysis" / "score.json").read_text())
     assert score["targets"] == {} and score["all_targets_met"] is None

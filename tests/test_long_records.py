@@ -76,10 +76,10 @@ def test_tactile_analyze_streams_a_long_record_and_says_so_in_the_summary(long_s
     r = subprocess.run(ANALYZE + [f"run={long_store}", "analysis.memory.chunk_frames=5000", "analysis.progress=false"],
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
-    summary = json.loads((long_store.parent / "summary.json").read_text())
+    summary = json.loads((long_store.parent / "analysis" / "summary.json").read_text())
     assert summary["provenance"]["preparation"]["stretches"] == 12
     assert summary["headline"]["fingers_in_contact"] == 5
-    assert len(list((long_store.parent / "figures").glob("*.png"))) >= 4
+    assert len(list((long_store.parent / "analysis" / "figures").glob("*.png"))) >= 4
 
 
 def test_the_smoothers_reach_covers_their_memory():

@@ -245,9 +245,9 @@ def test_the_analysis_dates_the_slip_labels_the_held_grasp_and_marks_the_reactio
     summary = analyze_run(store, {"progress": False, "max_segment_figures": 0}, console=lambda *a: None)
     labels = {s["label"] for s in summary["segments"]}
     assert {"pour", "held"} <= labels and not labels & {"rotation", "downward", "full_slip"}
-    score = json.loads((store.parent / "score.json").read_text())
+    score = json.loads((store.parent / "analysis" / "score.json").read_text())
     assert abs(score["summary"]["slip_onset_error_ms"]) <= 20
-    assert (store.parent / "figures" / "pressure.png").stat().st_size > 10_000
+    assert (store.parent / "analysis" / "figures" / "pressure.png").stat().st_size > 10_000
 
 
 def test_a_restarted_frame_counter_restarts_the_online_flow_instead_of_blinding_it():

@@ -294,8 +294,8 @@ def test_a_signal_during_the_analysis_drops_the_analysis_and_keeps_the_run(tmp_p
     assert proc.returncode == 3 and "Traceback" not in err, err
     assert "analysis interrupted" in out and "tactile-analyze run=" in out
     store_opens_closed(tmp_path / "run" / "run.zarr", "success")
-    assert not (tmp_path / "run" / "summary.json").exists()
-    assert not list((tmp_path / "run").glob(".analysis-*"))
+    assert not (tmp_path / "run" / "analysis" / "summary.json").exists()
+    assert not list((tmp_path / "run").glob(".analysis-*")) and not (tmp_path / "run" / "analyses").exists()
 
 
 @pytest.mark.slow
@@ -311,7 +311,7 @@ def test_a_signal_as_a_finished_run_closes_its_store_skips_the_analysis_and_says
     assert proc.returncode == 3 and "Traceback" not in err, (out, err)
     assert "success; not analysed (stopped by the operator)" in out, out
     store_opens_closed(tmp_path / "run" / "run.zarr", "success")
-    assert not (tmp_path / "run" / "summary.json").exists()
+    assert not (tmp_path / "run" / "analysis" / "summary.json").exists()
 
 
 @pytest.fixture(scope="module")
@@ -333,12 +333,12 @@ def test_tactile_analyze_interrupted_says_so_and_leaves_nothing_partial(recorded
     if moment == "computing":
         wait_for(lambda: rundir.holder(recorded.parent) == proc.pid or proc.poll() is not None)
     else:
-        wait_for(lambda: any(recorded.parent.glob(".analysis-staging-*")) or proc.poll() is not None, step=0.002)
+        wait_for(lambda: any(recorded.parent.glob("analyses/.staging-*")) or proc.poll() is not None, step=0.002)
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 3 and "Traceback" not in err, err
     assert len(err.strip().splitlines()) == 1 and "interrupted" in err
-    assert not list(recorded.parent.glob(".analysis-*")) and not (recorded.parent / "summary.json").exists()
+    assert not (recorded.parent / "analyses").exists() and not (recorded.parent / "analysis" / "summary.json").exists()
 
 
 SWALLOWED = """
@@ -373,7 +373,7 @@ def test_a_ctrl_c_a_library_swallows_during_the_analysis_still_stops_it(recorded
     proc = subprocess.run([sys.executable, "-c", SWALLOWED, str(run / "run.zarr"), str(int(sig))], cwd=ROOT,
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 3 and "interrupted" in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
-    assert not (run / "summary.json").exists() and not list(run.glob(".analysis-*"))
+    assert not (run / "analysis" / "summary.json").exists() and not (run / "analyses").exists()
 
 
 @pytest.mark.slow
@@ -383,8 +383,11 @@ def test_ctrl_c_at_any_moment_of_tactile_analyze_is_the_interrupt_or_a_whole_ana
     of the run is timed once, then other copies are interrupted at 8 moments spread over that
     time: each ends as the interrupt (one line, exit 3, the run directory as it was) or, if
     the signal came late, as a whole analysis."""
+    def run_dir(at):
+        return tmp_path / f"run-{at}"
+
     def analyse(at=None):
-        run = tmp_path / f"run-{at}"
+        run = run_dir(at)
         shutil.copytree(recorded.parent, run)
         before = sorted(p.name for p in run.iterdir())
         t0 = time.monotonic()
@@ -402,7 +405,7 @@ def test_ctrl_c_at_any_moment_of_tactile_analyze_is_the_interrupt_or_a_whole_ana
     for i in range(8):
         at = round(took * (i + 0.5) / 8, 3)
         code, err, before, after, _ = analyse(at)
-        whole = "summary.json" in after and not [n for n in after if n.startswith(".analysis-")]
+        whole = "summary.json" in after and not list(run_dir(at).glob("analyses/.staging-*"))
         if code == 0:
             assert whole, (at, after)
         else:                   # interrupted: nothing written, or the signal came after the results were in
@@ -472,7 +475,7 @@ def test_an_analysis_that_fails_inside_tactile_run_fails_the_job_and_says_what_s
     (line,) = [x for x in proc.stdout.splitlines() if x.startswith("run ")]
     assert ": success, recorded; analysis failed (OSError)" in line and "tactile-analyze run=" in line
     store_opens_closed(small_disk / "run" / "run.zarr", "success")
-    assert not list((small_disk / "run").glob(".analysis-*")) and not (small_disk / "run" / "summary.json").exists()
+    assert not (small_disk / "run" / "analyses").exists() and not (small_disk / "run" / "analysis" / "summary.json").exists()
 
 
 def test_a_zarr_write_cut_by_ctrl_c_is_settled_before_its_directory_is_removed(tmp_path):

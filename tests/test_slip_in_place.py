@@ -346,7 +346,7 @@ def test_the_analysis_reads_the_slip_and_meets_its_targets(cli_runs, kind, tare,
     store = tmp_path / "run.zarr"
     shutil.copytree(tree.attrs["_store"], store)
     summary = analyze_run(store, {"figures": False, "progress": False}, console=lambda *a: None)
-    score = json.loads((tmp_path / "score.json").read_text())
+    score = json.loads((tmp_path / "analysis" / "score.json").read_text())
     assert score["all_targets_met"] is True, score["targets"]
     assert set(score["targets"]) <= {"slip_direction_correct_fraction", "rotation_sense_correct_fraction",
                                      "touch_vs_slip_correct_fraction", "contact_found_fraction"}

@@ -90,7 +90,7 @@ def _run_analyse_view(run_dir: Path, *overrides) -> dict:
     rrd = run_dir / "view.rrd"
     assert tactile_view([str(run_dir), "--save", str(rrd)]) == 0
     return {"dir": run_dir, "rrd": Recording(rrd), "tree": xr.open_datatree(str(result.store), engine="zarr"),
-            "summary": json.loads((run_dir / "summary.json").read_text()), "console": lines}
+            "summary": json.loads((run_dir / "analysis" / "summary.json").read_text()), "console": lines}
 
 
 @pytest.fixture(scope="module")

@@ -203,7 +203,10 @@ def intensity_ranges(run: RunData, prepared: PreparedRun, cfg, contacts: dict | 
 
 
 def _summary(run_dir: Path, notes: list) -> dict | None:
-    path = run_dir / "summary.json"
+    """The current analysis's ``summary.json`` (``RUN/analysis/``, :mod:`runstore.analyses`)."""
+    from tactile_flow.runstore.analyses import SUMMARY, current_dir
+    current = current_dir(run_dir)
+    path = (current or run_dir) / SUMMARY
     if not path.is_file():
         notes.append("summary.json: not analysed yet (no segments); run tactile-analyze to add them")
         return None
