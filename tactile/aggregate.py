@@ -20,7 +20,7 @@ import numpy as np
 
 from ._checks import finite_array
 
-__all__ = ["FlowAggregates", "aggregate_flow", "aggregation_constants", "centre_of_pressure", "press_centre",
+__all__ = ["FlowAggregates", "aggregate_flow", "aggregation_constants", "centre_of_pressure",
            "flow_functionals", "window"]
 
 
@@ -185,14 +185,3 @@ def centre_of_pressure(activation, taxels) -> tuple[np.ndarray, np.ndarray]:
         cop = np.where(weight > 0, (load @ taxels) / weight, np.nan)
     return cop, activation.sum(axis=-1)
 
-
-def press_centre(taxels, point, width: float = 3.0) -> np.ndarray:
-    """(3,) the centre of pressure (:func:`centre_of_pressure`) of a Gaussian press ``width`` mm
-    wide (σ) centred at ``point`` (x, y used), mm: where the taxels put an object pressed there.
-    With ``point`` the pad's lowest point, the centre of pressure of an object resting on the pad
-    (the taxels' own centroid is that only when they are laid out evenly about it: not on a
-    classic BioTac, whose electrodes reach 12 mm further towards the tip than the back)."""
-    taxels = finite_array("taxels", taxels, ndim=2, last=3)
-    p = finite_array("point", point, ndim=1, last=3)
-    press = np.exp(-((taxels[:, :2] - p[:2]) ** 2).sum(-1) / (2.0 * width ** 2))
-    return centre_of_pressure(press[None], taxels)[0][0]

@@ -269,6 +269,15 @@ class SensorModel:
         return np.linalg.norm(self.taxels[:, :2] - self.shape.pole[:2], axis=1) <= r
 
     @property
+    def pad_centre(self) -> np.ndarray:
+        """(3,) mm, the centroid of the pad's taxels (:attr:`pad`; of every taxel when every taxel
+        is the pad): where the taxels put an object resting on the pad, the reference of the slip
+        estimate's unloaded centre of pressure (the classic BioTac's taxels reach 12 mm further
+        towards the tip than the back, so their centroid is 3.2 mm off the pad)."""
+        pad = self.pad
+        return self.taxels.mean(axis=0) if pad is None else self.taxels[pad].mean(axis=0)
+
+    @property
     def counts_max(self) -> int:
         """Full scale of the electrode ADC (counts)."""
         return int(self.electrodes.counts_max)
