@@ -54,20 +54,24 @@ class ImpedanceReader:
     samples bridged linearly in time between its nearest valid samples (wherever they lie,
     so a stretch gets the values the whole record would).
 
-    ``electrodes``: (T, F, 24) counts (an array or :class:`.electrodes.StoredElectrodes`);
+    ``electrodes``: (T, F, N) counts (an array or :class:`.electrodes.StoredElectrodes`);
     ``valid``: (T, F) bool; ``bridged``: the fingers (indices) whose invalid samples are
-    bridged (the usable ones); the others are only clipped into 1..4094 counts.
+    bridged (the usable ones); the others are only clipped into the usable counts (1..4094).
+    ``sensor``: the :class:`tactile.sensor.SensorModel` whose counts these are (its usable
+    range and its counts → impedance); the BioTacs' when ``None``.
     """
 
-    def __init__(self, electrodes, valid: np.ndarray, bridged):
+    def __init__(self, electrodes, valid: np.ndarray, bridged, sensor=None):
         self.electrodes, self.valid = electrodes, valid
         self.T, self.F = valid.shape
+        self._range = COUNT_RANGE if sensor is None else sensor.valid_counts
+        self._impedance = signals.counts_to_impedance if sensor is None else sensor.impedance
         self._ok = {k: np.flatnonzero(valid[:, k]) for k in bridged if not valid[:, k].all()}
 
     def __call__(self, a: int, b: int, k: int | None = None) -> np.ndarray:
-        """(b−a, F, 24) impedance of frames [a, b), or (b−a, 24) of finger ``k`` only."""
+        """(b−a, F, N) impedance of frames [a, b), or (b−a, N) of finger ``k`` only."""
         counts = self.electrodes[a:b] if k is None else self.electrodes[a:b, k]
-        imp = signals.counts_to_impedance(np.clip(counts, *COUNT_RANGE))
+        imp = self._impedance(np.clip(counts, *self._range))
         for j, ok in self._ok.items():
             if k is not None and j != k:
                 continue
@@ -87,7 +91,7 @@ class ImpedanceReader:
         inside = (xp >= a) & (xp < b)
         fp[inside] = imp[xp[inside] - a]
         for i in outside:
-            fp[xp == i] = signals.counts_to_impedance(np.clip(self.electrodes[i, j], *COUNT_RANGE))
+            fp[xp == i] = self._impedance(np.clip(self.electrodes[i, j], *self._range))
         x = np.flatnonzero(bad) + a
         for t in range(imp.shape[1]):
             imp[bad, t] = np.interp(x, xp, fp[:, t])

@@ -36,13 +36,14 @@ from hydra.types import RunMode
 
 import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import signals_received
+from tactile_flow.cliapp.sensors import composed_sensor
+from tactile_flow.validation import ConfigError
 from tactile_flow.conf import DIR as CONF_DIR
 from tactile_flow.runstore import files
 from tactile_flow.runstore.analyses import AnalysisNameTaken
 from tactile_flow.runstore.paths import PathOutsideRoot
 from tactile_flow.runstore.rundir import RunDirBusy
 
-from .config import AnalysisConfigError
 from .load import AnalysisInputError
 
 BAD_INPUT, FAILED, INTERRUPTED = 2, 1, 3
@@ -86,11 +87,14 @@ def table_dir(spec: str) -> Path:
 
 
 def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
-                  table: bool = True, name: str | None = None, force: bool = False) -> tuple[int, list[dict]]:
+                  table: bool = True, name: str | None = None, force: bool = False,
+                  sensor=None) -> tuple[int, list[dict]]:
     """Analyse the run stores ``spec`` names (:func:`find_stores`) into analyses called ``name``
     (default: their key, :func:`analysis.run.default_name`); never raises. The exit code and
     one row per run (``run``, ``analysis`` (its name), ``result``, then the summary's
-    ``headline``); with ``table`` and several runs, their table is written (:func:`table_dir`)."""
+    ``headline``); with ``table`` and several runs, their table is written (:func:`table_dir`).
+    ``sensor``: the :class:`tactile.sensor.SensorModel` asked for (``sensor=``); a store
+    recorded with another is refused (bad input), the others analysed."""
     from .run import analyze_run
     stores = find_stores(spec) if spec else []
     if not stores:
@@ -102,12 +106,12 @@ def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
         row = {"run": str(store), "analysis": name or ""}
         rows.append(row)
         try:
-            summary = analyze_run(store, analysis_cfg, name=name, force=force, console=console)
+            summary = analyze_run(store, analysis_cfg, name=name, force=force, console=console, sensor=sensor)
             row["analysis"] = summary.get("analysis") or row["analysis"]
             row["result"] = "analysed"
             row.update(summary.get("headline", {}))
-        except (AnalysisInputError, AnalysisConfigError, PathOutsideRoot, RunDirBusy, AnalysisNameTaken) as exc:
-            _report(exc, "error", verbose)   # bad input: a planted link, a name, a directory in use
+        except (AnalysisInputError, ConfigError, PathOutsideRoot, RunDirBusy, AnalysisNameTaken) as exc:
+            _report(exc, "error", verbose)   # bad input: a planted link, a name, a directory in use, another sensor
             row["result"] = f"error: {exc}"
             code = max(code, BAD_INPUT)
         except Exception as exc:  # noqa: BLE001 - one line per failed run, keep going
@@ -214,10 +218,17 @@ def _app(cfg) -> None:
         jobresults.record(BAD_INPUT)
         return
     sweep = HydraConfig.get().mode == RunMode.MULTIRUN          # the sweep's table, not one per job
+    try:
+        sensor = composed_sensor(cfg, default=None)
+    except ConfigError as exc:
+        _report(exc, "error", bool(cfg.get("verbose")))
+        jobresults.record(BAD_INPUT)
+        return
     code, rows = 0, []
     for spec in (run if OmegaConf.is_list(run) else [run]):
         c, r = analyse_paths(str(spec), cfg.analysis, bool(cfg.get("verbose")), table=not sweep,
-                             name=None if cfg.get("name") is None else str(cfg.name), force=bool(cfg.get("force")))
+                             name=None if cfg.get("name") is None else str(cfg.name), force=bool(cfg.get("force")),
+                             sensor=sensor)
         code, rows = max(code, c), rows + r
         if c == INTERRUPTED:
             break

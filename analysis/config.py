@@ -13,7 +13,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tactile_flow.tactile import flow as tflow
-from tactile_flow.tactile.frames import DEFAULT_VIEWS
 from tactile_flow.tactile.geodesic import GEODESIC_METHODS
 from tactile_flow.tactile.surface import KERNEL_FORMS
 from tactile_flow.tactile.pipeline import TactileConfig
@@ -96,7 +95,7 @@ class AnalysisConfig:
 
     enabled: bool = True
     tactile: TactileConfig = field(default_factory=TactileConfig)
-    views: tuple[str, ...] = ("bottom", "left", "right")
+    views: tuple[str, ...] = ("bottom", "left", "right")      # () in a config: the sensor model's (for_sensor)
     baseline_fallback_window_s: float = 0.5
     baseline_fallback_contact_min: float = 20.0
     pressure_signal: str = "auto"
@@ -182,11 +181,18 @@ def _positive(key: str, value: float) -> None:
         raise AnalysisConfigError(f"analysis.{key}: expected a value > 0, got {value!r}")
 
 
-def load_config(node=None) -> AnalysisConfig:
+def load_config(node=None, sensor=None) -> AnalysisConfig:
     """Validate the ``analysis`` node (DictConfig, dict or None for the defaults); an
-    :class:`AnalysisConfig` (checked already) is returned as it is."""
+    :class:`AnalysisConfig` (checked already) is returned as it is. With ``sensor`` (a
+    :class:`tactile.sensor.SensorModel`), the config for that sensor (:func:`for_sensor`): what
+    ``tactile-run`` checks before anything moves."""
     if isinstance(node, AnalysisConfig):
-        return node
+        return node if sensor is None else for_sensor(node, sensor)
+    cfg = _load_config(node)
+    return cfg if sensor is None else for_sensor(cfg, sensor)
+
+
+def _load_config(node) -> AnalysisConfig:
     raw = _plain(node)
     d = dict(raw)
     known = {"enabled", "tactile", "views", "flow", "baseline", "pressure", "segmentation", "estimates",
@@ -197,6 +203,8 @@ def load_config(node=None) -> AnalysisConfig:
     intensity = "contact" if tac.get("intensity_range", "contact") == "contact" else "fixed"
     if intensity == "contact":
         tac.pop("intensity_range", None)
+    if "size" in tac and tac["size"] is None:                  # null: the sensor model's frame size (for_sensor)
+        tac.pop("size")
     _refuse_unknown("analysis.tactile", tac, _TACTILE_KEYS)
     fl = dict(d.get("flow") or {})
     reference = _typed("flow.reference", fl.pop("reference", "auto"), str)
@@ -215,13 +223,12 @@ def load_config(node=None) -> AnalysisConfig:
         raise AnalysisConfigError("analysis.flow.reference_time_s: expected a time ≥ 0 s (since run start) "
                                   f"with flow.reference=time, got {ref_time!r}")
     _refuse_unknown("analysis.flow", fl, set(_FLOW_KEYS) | _FLOW_ANALYSIS_KEYS)
-    views = d.get("views", ["bottom", "left", "right"])
-    if not isinstance(views, list) or not views or not all(isinstance(v, str) for v in views):
-        raise AnalysisConfigError(f"analysis.views: expected a non-empty list of view names, got {views!r}")
-    for i, view in enumerate(views):
-        if view not in DEFAULT_VIEWS:
-            raise AnalysisConfigError(f"analysis.views[{i}]", unknown_key("analysis.views", view, DEFAULT_VIEWS,
-                                                                          what="view").message)
+    views = d.get("views")
+    if views is None:
+        views = []                                             # null: the sensor model's views (for_sensor)
+    elif not isinstance(views, list) or not views or not all(isinstance(v, str) for v in views):
+        raise AnalysisConfigError(f"analysis.views: expected a non-empty list of view names (or null: the sensor "
+                                  f"model's), got {views!r}")
     tk = {k: _typed(f"tactile.{k}", v, _TACTILE_KEYS[k]) for k, v in tac.items()}
     for k, choices in (("render", ("exact", "linear")), ("kernel", KERNEL_FORMS), ("geodesic", GEODESIC_METHODS)):
         if k in tk and tk[k] not in choices:
@@ -263,7 +270,7 @@ def load_config(node=None) -> AnalysisConfig:
     con = _section(Contact, "contact", d.get("contact") or {})
     sl = dict(d.get("slip") or {})
     if "views" in sl:
-        if not isinstance(sl["views"], list) or not sl["views"] or not all(v in views for v in sl["views"]):
+        if not isinstance(sl["views"], list) or not sl["views"] or not all(v in views or not views for v in sl["views"]):
             raise AnalysisConfigError(f"analysis.slip.views: expected a non-empty list of the analysed views "
                                       f"{views}, got {sl['views']!r}")
         sl["views"] = tuple(sl["views"])
@@ -283,6 +290,32 @@ def load_config(node=None) -> AnalysisConfig:
                           static_every=static_every,
                           intensity=intensity,
                           raw=raw, **top)
+
+
+def for_sensor(cfg: AnalysisConfig, sensor) -> AnalysisConfig:
+    """``cfg`` for the sensor model ``sensor`` (:class:`tactile.sensor.SensorModel`): with no
+    ``analysis.views`` given, the sensor's views, and with no ``analysis.tactile.size``, its
+    ``frame_size`` (when it gives one); views it does not have (nor
+    ``tactile.custom_views``) are an :class:`AnalysisConfigError` naming them, as are slip
+    evidence views outside the analysed ones (a flat pad has only ``bottom``)."""
+    tactile = cfg.tactile
+    if sensor.frame_size is not None and (cfg.raw.get("tactile") or {}).get("size") is None:
+        tactile = dataclasses.replace(tactile, size=tuple(sensor.frame_size))
+    known = (*sensor.views, *cfg.tactile.custom_views)
+    views = tuple(cfg.views) or tuple(sensor.views)
+    for i, view in enumerate(views):
+        if view not in known:                        # a misspelt view: refused before the run, with the nearest
+            raise AnalysisConfigError(f"analysis.views[{i}]", unknown_key("analysis.views", view, known, what=(
+                f"view of sensor {sensor.name}")).message)
+    slip_views = tuple(v for v in cfg.slip.views if v in views)
+    if not slip_views:
+        raise AnalysisConfigError("analysis.slip.views", f"{list(cfg.slip.views)}: none of them is analysed for sensor "
+                                                         f"{sensor.name} (views {', '.join(views)})")
+    if "views" in (cfg.raw.get("slip") or {}) and slip_views != tuple(cfg.slip.views):
+        raise AnalysisConfigError("analysis.slip.views", f"{list(cfg.slip.views)}: expected some of the analysed "
+                                                         f"views {list(views)}")
+    return dataclasses.replace(cfg, views=views, tactile=dataclasses.replace(tactile, views=views),
+                               slip=dataclasses.replace(cfg.slip, views=slip_views))
 
 
 def as_dict(cfg: AnalysisConfig) -> dict[str, Any]:

@@ -87,15 +87,15 @@ class StoredElectrodes:
         return StoredElectrodes(self._array, base[keep], self._on_error)
 
 
-def screen_counts(source) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
-    """One pass over the stored electrodes (T, F, 24) counts: which fingers read all 24
-    electrodes in range in each frame, which frames read 0 everywhere, which read the
-    saturated 4095 everywhere, and a checksum.
+def screen_counts(source, count_range=COUNT_RANGE) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """One pass over the stored electrodes (T, F, N) counts: which fingers read all N
+    electrodes within ``count_range`` (the sensor model's usable counts) in each frame, which
+    frames read 0 everywhere, which read saturated (above the range) everywhere, and a checksum.
 
     Returns ``(in_range (T, F) bool, all_zero (T,) bool, all_saturated (T,) bool, sha256 hex)``;
     the checksum is of the counts as float64, frame after frame (the same for a plain array and
     a stored source)."""
-    lo, hi = COUNT_RANGE
+    lo, hi = count_range
     in_range, zero, saturated = [], [], []
     h = hashlib.sha256()
     chunks = source.chunks() if isinstance(source, StoredElectrodes) else \
@@ -104,7 +104,7 @@ def screen_counts(source) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
         c = np.ascontiguousarray(c, float)
         in_range.append(np.all((c >= lo) & (c <= hi), axis=2))
         zero.append(np.all(c == 0, axis=(1, 2)))
-        saturated.append(np.all(c >= 4095, axis=(1, 2)))
+        saturated.append(np.all(c > hi, axis=(1, 2)))
         h.update(c.tobytes())
     F = source.shape[1]
     return (np.concatenate(in_range) if in_range else np.zeros((0, F), bool),

@@ -240,13 +240,14 @@ def taxels(a):
     fig.subplots_adjust(top=0.93, bottom=0.09, hspace=0.12, **WIDE)
     ax, ax2 = fig.subplots(2, 1, gridspec_kw={"height_ratios": [2, 1]})
     env = a.prepared.envelope                    # a long record: each stretch of frames by its highest value
-    im = ax.imshow(env.act_max[:, k].T, aspect="auto", origin="lower", extent=(t[0], t[-1], 0.5, 24.5),
+    n = env.act_max.shape[2]
+    im = ax.imshow(env.act_max[:, k].T, aspect="auto", origin="lower", extent=(t[0], t[-1], 0.5, n + 0.5),
                    cmap="magma", interpolation="nearest")
     _bands(ax, a, f, labels=False, y=(0.97, 1.0), alpha=1.0)      # the bands as a strip along the heatmap's top
     box = ax.get_position()
     cax = fig.add_axes([box.x1 + 0.01, box.y0, 0.012, box.height])
     fig.colorbar(im, cax=cax, label="activation (kΩ)")
-    ax.set_ylabel("taxel (1..24)")
+    ax.set_ylabel(f"taxel (1..{n})")
     ax.set_title(f"{f}: smoothed taxel activations (impedance above rest); segments along the top", **TITLE)
     _bands(ax2, a, f)
     ax2.plot(*_interleave(t, env.edges, env.act_min[:, k], env.act_max[:, k]), lw=0.6)
@@ -279,10 +280,12 @@ def ellipsoid(a, model):
     ax.set_ylabel("y (mm, lateral)", labelpad=16)
     ax.set_zlabel("z (mm, pad normal)", labelpad=14)
     ax.tick_params(axis="both", pad=2, labelsize=8)
-    ax.set_box_aspect(np.ptp(pts, axis=0), zoom=0.95)
+    extent = np.ptp(pts, axis=0)
+    ax.set_box_aspect(np.maximum(extent, 0.05 * extent.max()), zoom=0.95)     # a flat sensor: a thin box
     ax.view_init(elev=-35, azim=-60)
+    name = model.sensor.name if model.sensor is not None else "the sensor"
     fig.suptitle(f"{f}: activation on the fingertip at t = {a.run.time[i]:.2f} s (its peak);\n"
-                 "cyan: the 24 taxels", fontsize=10)
+                 f"cyan: the {model.n_taxels} taxels of {name}", fontsize=10)
     cax = fig.add_axes([0.9, 0.22, 0.02, 0.5])
     fig.colorbar(cm.ScalarMappable(norm=norm, cmap="magma"), cax=cax, label="activation (kΩ)")
     return fig

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from tactile_flow.runstore.reader import data_arrays, open_group
+from tactile_flow.runstore.sensors import recorded_sensor, require_same_sensor
 
 from .electrodes import StoredElectrodes, screen_counts
 
@@ -41,16 +42,20 @@ class RunData:
         path: the store.
         time: (T,) BioTac frame times, s.
         fingers: finger names along axis 1 of ``electrodes``.
-        electrodes: (T, F, 24) raw counts (float64): an array, or for a long record a
+        electrodes: (T, F, N) raw counts (float64): an array, or for a long record a
             :class:`.electrodes.StoredElectrodes` read a stretch at a time (``electrodes[a:b]``).
             Frames no finger can use and frames with a bad time stamp are removed
             (``dropped``); a finger's own bad samples stay, marked in ``valid``.
-        valid: (T, F) bool, the finger's 24 electrodes all within 1..4094 counts (0 is a
-            short or a deleted chunk read back as zeros, 4095 a saturated or shorted channel).
+        valid: (T, F) bool, the finger's N electrodes all within the sensor's usable counts,
+            1..4094 on the BioTacs (0 is a short or a deleted chunk read back as zeros, 4095 a
+            saturated or shorted channel).
         pdc: (T, F) PDC counts (float32) or ``None`` (records with electrodes only).
-        baseline_counts: (F, 24) stored unloaded electrode counts (an imported recording's
+        baseline_counts: (F, N) stored unloaded electrode counts (an imported recording's
             calibration or estimate, a recorded run's session calibration: ``biotac/baseline``)
-            or ``None``; ``baseline_uncertainty`` (F, 24) counts, its stated uncertainty, if stored.
+            or ``None``; ``baseline_uncertainty`` (F, N) counts, its stated uncertainty, if stored.
+        sensor: the :class:`tactile.sensor.SensorModel` the record is read with (the one it was
+            recorded with: :func:`runstore.sensors.recorded_sensor`); ``sensor_how``: how it was
+            found (``recorded``, or ``assumed: ...`` for a store from before models were recorded).
         dropped: what was removed from the record and why: ``{"what", "frames", "reason"}``.
         arm_time, tcp_pose, tcp_speed: (A,), (A, 6) m/rad, (A, 6) m/s, rad/s, or ``None``.
         events: the event table (empty if the group is missing).
@@ -79,6 +84,13 @@ class RunData:
     baseline_counts: np.ndarray | None = None
     baseline_uncertainty: np.ndarray | None = None
     tree: object = field(default=None, repr=False)
+    sensor: object = field(default=None, repr=False)
+    sensor_how: str = "recorded"
+
+    @property
+    def n_taxels(self) -> int:
+        """Electrodes per finger (the N of ``electrodes``)."""
+        return int(self.electrodes.shape[2])
 
     @property
     def dropped_invalid(self) -> int:
@@ -134,9 +146,9 @@ IN_MEMORY_FRAMES = 10_000
 def screen_frames(path, time, in_range, all_zero, pdc, stored_valid, all_saturated=None):
     """Check the time axis and each finger's samples; choose the frames to keep.
 
-    ``in_range`` (T, F): the finger's 24 electrodes all within 1..4094 counts;
-    ``all_zero``, ``all_saturated`` (T,): every electrode of every finger reads 0, or the
-    saturated 4095 (:func:`.electrodes.screen_counts`). A record with no frame to keep is
+    ``in_range`` (T, F): the finger's N electrodes all within the usable counts (1..4094 on a
+    BioTac); ``all_zero``, ``all_saturated`` (T,): every electrode of every finger reads 0, or
+    above the usable counts (:func:`.electrodes.screen_counts`). A record with no frame to keep is
     refused naming why its frames were dropped (all zeros, saturation, out of range).
     Returns ``(keep (T,) bool, valid (T, F) bool, dropped)``: the frames kept, the validity
     of each finger's samples, and the list of what was dropped and why. A time axis that goes
@@ -173,9 +185,10 @@ def screen_frames(path, time, in_range, all_zero, pdc, stored_valid, all_saturat
         saturated = none & (all_saturated if all_saturated is not None else False)
         why = ("every electrode of every finger reads 0 (a deleted or unreadable chunk read back as zeros)"
                if zeros.sum() == none.sum() else
-               "every electrode of every finger reads 4095: saturated (an impedance of 0 kΩ: pressed beyond the "
-               "sensor's range, or its channels shorted)" if saturated.sum() == none.sum() else
-               "no finger has all 24 electrodes within 1..4094 counts")
+               "every electrode of every finger reads its full scale (a BioTac's 4095: saturated, an impedance "
+               "of 0 kΩ: pressed beyond the sensor's range, or its channels shorted)"
+               if saturated.sum() == none.sum() else
+               "no finger has all its electrodes within the usable counts (1..4094 on a BioTac)")
         dropped.append({"what": "frames", "frames": int(none.sum()), "reason": why})
         keep &= ~none
     if keep.sum() < 2:
@@ -185,8 +198,33 @@ def screen_frames(path, time, in_range, all_zero, pdc, stored_valid, all_saturat
     return keep, valid[keep], dropped
 
 
-def load_run(path, in_memory_frames: int = IN_MEMORY_FRAMES) -> RunData:
-    """Open ``path`` (a ``run.zarr``) and read what the analysis needs.
+def store_sensor(dt, path, requested=None):
+    """``(model, how)``: the sensor model to read the opened store ``dt`` with — the one it was
+    recorded with; ``requested`` (a :class:`tactile.sensor.SensorModel`, ``sensor=`` of
+    ``tactile-analyze``) must be that one, else :class:`tactile.sensor.SensorModelError`."""
+    b = dt["biotac"]
+    shape = b["electrodes"].shape
+    if len(shape) != 3:
+        raise AnalysisInputError(f"{path}: biotac/electrodes has shape {tuple(shape)}; expected (time, finger, taxel)")
+    recorded, how = recorded_sensor(dict(dt.attrs), int(shape[2]), str(path))
+    return require_same_sensor(recorded, how, requested, str(path)), how
+
+
+def peek_sensor(path, requested=None):
+    """:func:`store_sensor` of the store at ``path`` (its attributes only; ``None`` if ``path``
+    is not a readable run store: :func:`load_run` then says why)."""
+    try:
+        dt = open_group(Path(path))
+        if "biotac" not in set(dt.group_keys()) or "electrodes" not in dt["biotac"]:
+            return None
+    except Exception:  # noqa: BLE001 - load_run reports it
+        return None
+    return store_sensor(dt, path, requested)[0]
+
+
+def load_run(path, in_memory_frames: int = IN_MEMORY_FRAMES, sensor=None) -> RunData:
+    """Open ``path`` (a ``run.zarr``) and read what the analysis needs, with the sensor model it
+    was recorded with (``sensor``: a model asked for, which must be that one).
 
     The electrodes of a record longer than ``in_memory_frames`` frames stay in the store
     (:class:`.electrodes.StoredElectrodes`, read a stretch at a time); shorter ones are read whole.
@@ -212,14 +250,16 @@ def load_run(path, in_memory_frames: int = IN_MEMORY_FRAMES) -> RunData:
     b = dt["biotac"]
     if "electrodes" not in b or "time" not in b:
         raise AnalysisInputError(f"{path}: biotac group without electrodes/time; nothing to analyse")
+    sensor, sensor_how = store_sensor(dt, path, sensor)
     time = _values(b, "time", path)
     stored = StoredElectrodes(b["electrodes"], None, lambda exc: _unreadable(path, "electrodes", exc))
     fingers = [str(f) for f in _values(b, "finger", path, None)]
-    pdc = _values(b, "pdc", path, np.float32) if "pdc" in b else None     # counts: exact in float32
+    pressure = sensor.pressure.name if sensor.pressure is not None else None
+    pdc = _values(b, pressure, path, np.float32) if pressure is not None and pressure in b else None   # counts: exact in f4
     baseline_counts = _values(b, "baseline", path) if "baseline" in b else None
     baseline_unc = _values(b, "baseline_uncertainty", path) if "baseline_uncertainty" in b else None
     stored_valid = _values(b, "valid", path, bool) if "valid" in b else np.ones(len(time), bool)
-    in_range, all_zero, all_saturated, electrodes_sha = screen_counts(stored)
+    in_range, all_zero, all_saturated, electrodes_sha = screen_counts(stored, sensor.valid_counts)
     keep, valid, dropped = screen_frames(path, time, in_range, all_zero, pdc, stored_valid, all_saturated)
     del in_range, all_zero
     time = time[keep]
@@ -271,7 +311,8 @@ def load_run(path, in_memory_frames: int = IN_MEMORY_FRAMES) -> RunData:
     return RunData(path=path, time=time, fingers=fingers, electrodes=electrodes, pdc=pdc, arm_time=arm_time,
                    tcp_pose=tcp_pose, tcp_speed=tcp_speed, events=events, attrs=attrs, config=config,
                    missing=missing, input_sha256=h.hexdigest(), dropped=dropped, valid=valid,
-                   baseline_counts=baseline_counts, baseline_uncertainty=baseline_unc, tree=dt)
+                   baseline_counts=baseline_counts, baseline_uncertainty=baseline_unc, tree=dt,
+                   sensor=sensor, sensor_how=sensor_how)
 
 
 def _values(group, name: str, path: Path, dtype=float) -> np.ndarray:

@@ -20,6 +20,7 @@ from . import labels as labelling
 from . import segments as seg
 from . import slip as slp
 from .chunking import centre_of_pressure, finger_activation
+from .config import for_sensor
 from .load import RunData
 from .preprocess import PreparedRun, prepare
 
@@ -28,12 +29,13 @@ EDGE_REACH_S = 0.2
 """How far (s) a contact's edge may move from where the smoothed score put it (tactile.contact.refine_edges)."""
 
 
-def get_model(tactile_config):
-    """The :class:`tactile.pipeline.TactileModel` for a config, built once per process."""
+def get_model(tactile_config, sensor=None):
+    """The :class:`tactile.pipeline.TactileModel` for a config and a sensor model (default the
+    BioTac SP), built once per process."""
     from tactile_flow.tactile.pipeline import TactileModel
-    key = repr(tactile_config)
+    key = (repr(tactile_config), None if sensor is None else sensor.sha256)
     if key not in _MODELS:
-        _MODELS[key] = TactileModel.build(tactile_config)
+        _MODELS[key] = TactileModel.build(tactile_config, sensor=sensor)
     return _MODELS[key]
 
 
@@ -88,9 +90,15 @@ def _threshold(prepared: PreparedRun, k: int, cfg) -> float:
 
 
 def analyse(run: RunData, cfg, model=None) -> Analysis:
-    """Run the whole computation on ``run`` with the validated config ``cfg`` (AnalysisConfig)."""
+    """Run the whole computation on ``run`` with the validated config ``cfg`` (AnalysisConfig;
+    views left unset are the run's sensor model's: :func:`analysis.config.for_sensor`)."""
     t_start = _time.perf_counter()
-    model = model or get_model(cfg.tactile)
+    if run.sensor is not None:
+        cfg = for_sensor(cfg, run.sensor)
+    model = model or get_model(cfg.tactile, run.sensor)
+    if run.sensor is not None and model.n_taxels != run.n_taxels:
+        raise ValueError(f"model: built for {model.n_taxels} taxels, the run has {run.n_taxels} "
+                         f"(sensor {run.sensor.name}); build it with get_model(cfg.tactile, run.sensor)")
     s = cfg.segmentation
     rate = run.rate_hz
     T = len(run.time)
@@ -107,7 +115,8 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
         skipped.append({"what": "finger", "finger": f, "reason": f"not analysed: {why}"})
     for f, n in prepared.repaired.items():
         skipped.append({"what": "samples", "finger": f, "frames": n,
-                        "reason": "electrodes outside 1..4094 counts in these frames: bridged by interpolation"})
+                        "reason": "electrodes outside their usable counts (1..4094 on a BioTac) in these frames: "
+                                  "bridged by interpolation"})
     for d in run.dropped:
         skipped.append({**d, "what": f"{d['frames']} {d['what']}"})
     method = contact_method(prepared, cfg)
@@ -137,7 +146,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
     if scheme == labelling.SWEEP:
         # the 'during' plateau is measured on the width signal, so that the segment and the
         # width estimate (plateau duration x speed) describe the same stretch
-        wsig = prepared.proxy if cfg.estimates.width_signal == "proxy" else prepared.pressure
+        wsig = prepared.pad_proxy if cfg.estimates.width_signal == "proxy" else prepared.pressure
         for f in bumps:
             k = run.fingers.index(f)
             ws = seg.smooth(wsig[:, k], rate, s.smooth_s)
@@ -269,7 +278,7 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
     """One row per feature crossed: direction (sensor, world), width, height, texture angle."""
     out = []
     e = cfg.estimates
-    width_sig = prepared.proxy if e.width_signal == "proxy" else prepared.pressure
+    width_sig = prepared.pad_proxy if e.width_signal == "proxy" else prepared.pressure
     speed = None
     if run.arm_time is not None and run.tcp_speed is not None:
         speed = est.speed_mm_s(run.arm_time, run.tcp_speed, run.time)
@@ -354,9 +363,9 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
             if parts:
                 curl = np.mean([p.curl for p in parts], axis=0) / 2.0
                 rot[cf.window[0]:cf.window[1]] = seg.smooth(curl, rate, 0.5)
-        p = seg.smooth(prepared.proxy[:, k], rate, 0.5)
+        p = seg.smooth(prepared.pad_proxy[:, k], rate, 0.5)
         if reaction is None:
-            fast = seg.smooth(prepared.proxy[:, k], rate, cfg.segmentation.smooth_s)
+            fast = seg.smooth(prepared.pad_proxy[:, k], rate, cfg.segmentation.smooth_s)
         else:
             # the grasp tightened right after the slip: a smoothed pressure would carry that rise
             # back over the slip's fall, so the slip is dated on the causal (filter-only) proxy

@@ -95,10 +95,10 @@ class Envelope:
     peak: np.ndarray
 
     @classmethod
-    def empty(cls, T: int, F: int, bins: int = 2000) -> Envelope:
+    def empty(cls, T: int, F: int, bins: int = 2000, N: int = 24) -> Envelope:
         edges = np.unique(np.linspace(0, T, min(bins, T) + 1).astype(np.int64))
         n = len(edges) - 1
-        return cls(edges, *(np.full((n, F, 24), v) for v in (np.inf, -np.inf, np.inf, -np.inf)), np.zeros((F, 24)))
+        return cls(edges, *(np.full((n, F, N), v) for v in (np.inf, -np.inf, np.inf, -np.inf)), np.zeros((F, N)))
 
     def add(self, a: int, raw: np.ndarray, act: np.ndarray) -> None:
         """Fold in frames [a, a + len(raw)) (each (n, F, 24))."""
@@ -142,6 +142,9 @@ class PreparedRun:
             :class:`analysis.chunking.LazyActivation`: index them by windows (``[a:b, k]``).
         pressure: (T, F) pressure above rest (``pressure_units``).
         proxy: (T, F) sum of smoothed activations, kΩ (always computed).
+        pad_proxy: (T, F) the same sum over the sensor model's pad taxels
+            (:attr:`tactile.sensor.SensorModel.pad`), the signal widths are measured on; the
+            ``proxy`` array itself when every taxel is the pad.
         causal_proxy: (T, F) sum of the forward-only Kalman-filtered raw activation, kΩ: what
             an online estimate knows at each frame (dates a slip the smoother would blur), or
             ``None`` when not asked for.
@@ -178,6 +181,11 @@ class PreparedRun:
     preparation: dict = field(default_factory=dict)
     unusable: dict = field(default_factory=dict)
     repaired: dict = field(default_factory=dict)
+    pad_proxy: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.pad_proxy is None:
+            self.pad_proxy = self.proxy
 
     @property
     def baseline_source(self) -> str:
@@ -210,11 +218,12 @@ def quietest_window(level, n: int) -> tuple[int, int]:
     return start, start + n
 
 
-def unusable_fingers(electrodes, valid: np.ndarray, fingers) -> tuple[dict, dict]:
+def unusable_fingers(electrodes, valid: np.ndarray, fingers, sensor=None) -> tuple[dict, dict]:
     """``(unusable, repaired)``: the fingers with fewer than :data:`MIN_USABLE_FRACTION` usable
     samples (finger → why), and the others' count of samples to bridge (finger → frames).
 
-    ``electrodes``: (T, F, 24) counts (array or stored); ``valid``: (T, F) bool."""
+    ``electrodes``: (T, F, N) counts (array or stored); ``valid``: (T, F) bool; ``sensor``: their
+    :class:`tactile.sensor.SensorModel` (its usable counts; the BioTacs' 1..4094 by default)."""
     T = len(valid)
     unusable, repaired = {}, {}
     for k, f in enumerate(fingers):
@@ -222,37 +231,40 @@ def unusable_fingers(electrodes, valid: np.ndarray, fingers) -> tuple[dict, dict
         if ok == T:
             continue
         if ok < max(2, MIN_USABLE_FRACTION * T):
-            unusable[f] = _why_unusable(electrodes, k, ok, T)
+            unusable[f] = _why_unusable(electrodes, k, ok, T, sensor)
         else:
             repaired[f] = T - ok
     return unusable, repaired
 
 
-def _why_unusable(electrodes, k: int, ok: int, T: int) -> str:
-    zero, saturated, stuck = True, True, np.ones(24, bool)
+def _why_unusable(electrodes, k: int, ok: int, T: int, sensor=None) -> str:
+    lo, hi = COUNT_RANGE if sensor is None else sensor.valid_counts
+    top = 4095 if sensor is None else sensor.counts_max
+    n = electrodes.shape[2]
+    zero, saturated, stuck = True, True, np.ones(n, bool)
     for a in range(0, T, READ_FRAMES):
         c = electrodes[a:a + READ_FRAMES, k]
         zero &= bool(np.all(c <= 0))
-        saturated &= bool(np.all(c >= 4095))
-        stuck &= np.all((c < 1) | (c > 4094), axis=0)
+        saturated &= bool(np.all(c >= top))
+        stuck &= np.all((c < lo) | (c > hi), axis=0)
     if zero:
         return "every electrode reads 0 in every frame (disconnected, or a channel shorted)"
     if saturated:
-        return "every electrode reads 4095 (saturated: an impedance of 0 kΩ) in every frame"
+        return f"every electrode reads {top} (saturated: an impedance of 0 kΩ) in every frame"
     if stuck.any():
-        return f"taxel(s) {', '.join(str(i + 1) for i in np.flatnonzero(stuck))} outside 1..4094 counts throughout"
-    return f"only {ok} of {T} frames have all 24 electrodes within 1..4094 counts"
+        return f"taxel(s) {', '.join(str(i + 1) for i in np.flatnonzero(stuck))} outside {lo:g}..{hi:g} counts throughout"
+    return f"only {ok} of {T} frames have all {n} electrodes within {lo:g}..{hi:g} counts"
 
 
 def choose_baseline(run: RunData, read: ImpedanceReader, cfg) -> Baseline:
     """The rest impedance, its uncertainty and where it comes from (module doc); ``read(a, b)``
     gives the (repaired) impedance of frames [a, b)."""
-    F = len(run.fingers)
+    F, N = len(run.fingers), run.n_taxels
     n_fb = int(round(cfg.baseline_fallback_window_s * run.rate_hz))
     window = tare_window(run)
     if window is not None:
         base = read(*window).mean(axis=0)
-        return Baseline("tare", base, np.zeros((F, 24)), "tare: the protocol's rest stretch before the contact",
+        return Baseline("tare", base, np.zeros((F, N)), "tare: the protocol's rest stretch before the contact",
                         [window] * F)
     if run.pdc is not None:
         level = run.pdc
@@ -262,7 +274,7 @@ def choose_baseline(run: RunData, read: ImpedanceReader, cfg) -> Baseline:
     rest = [quietest_window(level[:, k], n_fb) for k in range(F)]
     del level
     if run.baseline_counts is not None:
-        counts = np.clip(run.baseline_counts, *COUNT_RANGE)
+        counts = np.clip(run.baseline_counts, *run.sensor.valid_counts)
         method = (run.attrs.get("baseline") or {}).get("method", "stored")
         if run.baseline_uncertainty is not None:
             sigma, how = run.baseline_uncertainty, "its stored uncertainty"
@@ -270,11 +282,11 @@ def choose_baseline(run: RunData, read: ImpedanceReader, cfg) -> Baseline:
             sigma, how = cfg.contact.stored_uncertainty_counts, \
                 f"an assumed {cfg.contact.stored_uncertainty_counts:g} counts per electrode"
         unc = tcontact.counts_uncertainty_to_log(counts, sigma)
-        return Baseline("stored", signals.counts_to_impedance(counts), np.broadcast_to(unc, (F, 24)).copy(),
+        return Baseline("stored", run.sensor.impedance(counts), np.broadcast_to(unc, (F, N)).copy(),
                         f"no tare event: the stored baseline biotac/baseline ({method}), uncertain by {how}", rest)
     base = np.stack([read(a, b, k).mean(axis=0) for k, (a, b) in enumerate(rest)])
     what = "PDC" if run.pdc is not None else "summed electrode impedance"
-    return Baseline("record", base, np.zeros((F, 24)),
+    return Baseline("record", base, np.zeros((F, N)),
                     f"no tare event and no stored baseline: the {cfg.baseline_fallback_window_s:g} s stretch of "
                     f"lowest {what} per finger, assumed at rest (a record that never leaves contact has no rest "
                     f"stretch: import with baseline=estimate or a calibration file)", rest)
@@ -298,11 +310,12 @@ def prepare(run: RunData, cfg, model, causal_proxy: bool = True) -> PreparedRun:
     """Baseline → activation → despike + Kalman/RTS → pressure and contact score, all fingers,
     in one piece or a stretch at a time (module doc); ``causal_proxy=False`` leaves out the
     causal proxy (only a pour's slip dating reads it)."""
-    T, F = len(run.time), len(run.fingers)
+    T, F, N = len(run.time), len(run.fingers), run.n_taxels
     rate = run.rate_hz
     valid = run.valid if run.valid is not None else np.ones((T, F), bool)
-    unusable, repaired = unusable_fingers(run.electrodes, valid, run.fingers)
-    read = ImpedanceReader(run.electrodes, valid, [k for k, f in enumerate(run.fingers) if f not in unusable])
+    unusable, repaired = unusable_fingers(run.electrodes, valid, run.fingers, run.sensor)
+    read = ImpedanceReader(run.electrodes, valid, [k for k, f in enumerate(run.fingers) if f not in unusable],
+                           run.sensor)
     baseline = choose_baseline(run, read, cfg)
     if cfg.pressure_signal == "pdc" and run.pdc is None:
         baseline.description += "; pressure.signal=pdc but the record has no PDC: proxy used"
@@ -317,15 +330,19 @@ def prepare(run: RunData, cfg, model, causal_proxy: bool = True) -> PreparedRun:
 
     # pass 1: the proxies, the residuals the noise is measured on, the envelope
     proxy = np.empty((T, F), dtype)
+    pad = run.sensor.pad if run.sensor is not None else None
+    pad_proxy = proxy if pad is None else np.empty((T, F), dtype)
     causal = np.empty((T, F), dtype) if causal_proxy else None
     stride = -(-T // cfg.memory.noise_sample_frames)
-    residual = np.empty((len(range(0, T, stride)), F, 24))         # ln Z − ln Z_smoothed, sampled frames
-    envelope, kept = Envelope.empty(T, F), None
+    residual = np.empty((len(range(0, T, stride)), F, N))          # ln Z − ln Z_smoothed, sampled frames
+    envelope, kept = Envelope.empty(T, F, N=N), None
     for (a, b), (a0, b0) in parts:
         imp = read(a0, b0)
         raw, clean, act = smoothed(imp, base, cfg, model)
         core = slice(a - a0, b - a0)
         proxy[a:b] = signals.pdc_proxy(act[core])
+        if pad is not None:
+            pad_proxy[a:b] = signals.pdc_proxy(act[core][..., pad])
         if causal is not None:
             causal[a:b] = signals.kalman_filter(raw, R=tc.kalman_r, Q=tc.kalman_q)[core].sum(axis=-1)
         rows = np.arange(a + (-a) % stride, b, stride)
@@ -333,7 +350,7 @@ def prepare(run: RunData, cfg, model, causal_proxy: bool = True) -> PreparedRun:
         envelope.add(a, raw[core], act[core])
         kept = (raw, clean, act) if whole else None
         progress.update(b - a)
-    noise = tcontact.noise_from_residuals(residual, floor=1e-6, overwrite=True)          # (F, 24)
+    noise = tcontact.noise_from_residuals(residual, floor=1e-6, overwrite=True)          # (F, N)
     del residual
 
     # pass 2: the contact scores, which need the noise
@@ -364,10 +381,11 @@ def prepare(run: RunData, cfg, model, causal_proxy: bool = True) -> PreparedRun:
         def rest_of(k):
             return base if k is None else base[k]
         raw_activation = LazyActivation(lambda a0, b0, k: signals.activation(read(a0, b0, k), rest_of(k)),
-                                        (T, F, 24), 0, cfg.memory.chunk_frames)
+                                        (T, F, N), 0, cfg.memory.chunk_frames)
         activation = LazyActivation(lambda a0, b0, k: smoothed(read(a0, b0, k), rest_of(k), cfg, model)[2],
-                                    (T, F, 24), reach, cfg.memory.chunk_frames)
+                                    (T, F, N), reach, cfg.memory.chunk_frames)
     return PreparedRun(raw_activation=raw_activation, activation=activation, pressure=pressure, proxy=proxy,
+                       pad_proxy=pad_proxy,
                        causal_proxy=causal, pressure_units=units, pressure_name=name, baseline=baseline,
                        rest_noise=rest_noise, noise=noise, score=score, fine_score=fine, envelope=envelope,
                        preparation={"stretches": len(parts), "chunk_frames": cfg.memory.chunk_frames,

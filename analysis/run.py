@@ -34,9 +34,9 @@ from tactile_flow.tactile import warmup
 from . import figures as figs
 from . import results
 from . import score as scoring
-from .config import as_dict, load_config
+from .config import as_dict, for_sensor, load_config
 from .headline import headline, whole_contact_slips
-from .load import AnalysisInputError, load_run, open_truth
+from .load import AnalysisInputError, load_run, open_truth, peek_sensor
 from .pipeline import analyse, get_model
 
 SCHEMA_VERSION = "1.0"
@@ -92,14 +92,18 @@ def _segments_json(a) -> list[dict]:
 
 
 def analyze_run(store_path, analysis_cfg=None, *, name: str | None = None, force: bool = False,
-                console=print) -> dict:
+                console=print, sensor=None) -> dict:
     """Analyse ``store_path`` (a ``run.zarr``) with the ``analysis`` config node into the run's
     analysis ``name`` (default: :func:`default_name`) and make it current; return its summary.
     An analysis with the same code, config and store already kept is reused (made current,
-    nothing computed) unless ``force``. Raises :class:`AnalysisInputError` (nothing written)
-    when the input cannot be analysed at all, :class:`analysis.config.AnalysisConfigError` on
-    bad parameters, :class:`runstore.analyses.AnalysisNameTaken` when ``name`` is an analysis
-    of another code, config or store (``force`` replaces it; the old one is kept)."""
+    nothing computed) unless ``force``. The sensor model is the one the store was recorded
+    with; ``sensor`` (a :class:`tactile.sensor.SensorModel`) asks for one, which must be that
+    one (:func:`runstore.sensors.require_same_sensor`). Raises :class:`AnalysisInputError`
+    (nothing written) when the input cannot be analysed at all, a ``ConfigError``
+    (:class:`analysis.config.AnalysisConfigError`, ``tactile.sensor.SensorModelError``) on bad
+    parameters or a store of another sensor model, :class:`runstore.analyses.AnalysisNameTaken`
+    when ``name`` is an analysis of another code, config or store (``force`` replaces it; the
+    old one is kept)."""
     cfg = load_config(analysis_cfg)
     store_path = Path(store_path)
     if name is not None:
@@ -108,7 +112,7 @@ def analyze_run(store_path, analysis_cfg=None, *, name: str | None = None, force
         console(f"analysis: disabled (analysis.enabled=false); {store_path} not analysed")
         return {"headline": {"status": "disabled"}}
     if not (store_path / "zarr.json").is_file():
-        return _analyse_and_write(store_path, cfg, console, name, force)    # load_run says what is wrong
+        return _analyse_and_write(store_path, cfg, console, name, force, sensor)    # load_run says what is wrong
     run_dir = store_path.parent
     with rundir.locked(run_dir, shared=True):
         files.refuse_links(run_dir, (analyses.HISTORY, analyses.ANALYSES, rundir.LOCK_NAME))
@@ -116,15 +120,20 @@ def analyze_run(store_path, analysis_cfg=None, *, name: str | None = None, force
         if removed:
             console(f"analysis: removed what a killed analysis left in {run_dir}: {', '.join(removed)}")
         analyses.adopt_legacy(run_dir)
-        return _analyse_and_write(store_path, cfg, console, name, force)
+        return _analyse_and_write(store_path, cfg, console, name, force, sensor)
 
 
-def _analyse_and_write(store_path: Path, cfg, console, name, force) -> dict:
+def _analyse_and_write(store_path: Path, cfg, console, name, force, sensor=None) -> dict:
     signals_before = signals_received()          # one more by the end: a library swallowed its interrupt
+    recorded = peek_sensor(store_path, sensor)   # the store's model (a refusal if sensor= is another)
+    if recorded is not None:
+        cfg = for_sensor(cfg, recorded)
     # a first analysis on this machine compiles the kernels on every core while the run loads
-    with warmup.compiling(cfg.tactile, cfg.workers, console):
-        run = load_run(store_path, in_memory_frames=cfg.memory.chunk_frames)
-    key, key_parts = analysis_key(as_dict(cfg), run.input_sha256)
+    with warmup.compiling(cfg.tactile, cfg.workers, console, sensor=recorded):
+        run = load_run(store_path, in_memory_frames=cfg.memory.chunk_frames, sensor=sensor)
+    if run.sensor_how != "recorded":
+        console(f"analysis: sensor model {run.sensor.name} ({run.sensor_how})")
+    key, key_parts = analysis_key({**as_dict(cfg), "sensor": run.sensor.sha256}, run.input_sha256)
     name = name or default_name(cfg, key)
     kept = analyses.find(store_path.parent, name)
     if kept is not None and not force:
@@ -134,7 +143,7 @@ def _analyse_and_write(store_path: Path, cfg, console, name, force) -> dict:
             f"name={name}: {store_path.parent} already has an analysis {name} made with another code, config or "
             f"store (key {analyses.read_meta(kept).get('key')}, this one {key}); choose another name, or force=true "
             f"to replace it (the old one is kept as {name}~<its id>)")
-    model = get_model(cfg.tactile)
+    model = get_model(cfg.tactile, run.sensor)
     with long_lived_frozen():
         return _analyse(store_path, run, model, cfg, console, signals_before,
                         {"name": name, "key": key, "key_parts": key_parts}, replace=kept is not None)
@@ -166,6 +175,7 @@ def _analyse(store_path: Path, run, model, cfg, console, signals_before: int, na
                             "dropped_invalid_frames": run.dropped_invalid},
                   "baseline": a.prepared.baseline_source, "baseline_kind": a.prepared.baseline.kind,
                   "contact_method": a.contact_method, "pressure_signal": a.prepared.pressure_name,
+                  "sensor": {**run.sensor.summary(), "how": run.sensor_how},
                   "preparation": a.prepared.preparation}
     score = None
     truth = open_truth(run)

@@ -22,8 +22,9 @@ outside the pad, i.e. about the sensor's −z):
   Farnebäck explains a pattern appearing from nothing as the unpressed skin moving *out* of it,
   so it points *away* from the pressed region: negated where it is used), ``static_onset`` (from
   the reference frame), ``dynamic`` (the frame-to-frame flow summed), ``cop_unloaded`` (the
-  centre of pressure − the taxels' centroid), ``cop_onset`` (− its position at the reference)
-  and ``cop_trajectory_mm``.
+  centre of pressure − where the taxels put an object resting on the pad: the centroid of the
+  sensor model's pad taxels, :attr:`tactile.sensor.SensorModel.pad_centre`), ``cop_onset``
+  (− its position at the reference) and ``cop_trajectory_mm``.
 
 Decision (documented in docs/analysis.md, constants in ``analysis.slip``):
 
@@ -266,7 +267,9 @@ def _legacy_evidence(cf, activation, start, stop, ref, onset, views, model) -> d
     evidence["dynamic"] = {**_vec(dyn), "rotation_deg": float(np.mean(rots)) if rots else None}
     cop, _ = tagg.centre_of_pressure(activation[start:stop], model.taxels)
     good = np.all(np.isfinite(cop), axis=1)
-    centroid = model.taxels.mean(axis=0)
+    # where the taxels put an object resting on the pad: the centroid of the pad's taxels (of all
+    # of them on the SP; the classic BioTac's whole centroid is 3.2 mm off its pad)
+    centroid = model.taxels.mean(axis=0) if model.sensor is None else model.sensor.pad_centre
     evidence["cop_unloaded"] = _vec(cop[good].mean(axis=0) - centroid if good.any() else np.full(3, np.nan))
     cop_o = np.full(3, np.nan)
     if onset is not None and ref < stop:

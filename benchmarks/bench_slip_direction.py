@@ -1,7 +1,7 @@
 """The slip estimate on simulated slip-in-place runs, per evidence source, and on real touches.
 
     python benchmarks/bench_slip_direction.py [--out DIR] [--grid classic|varied] [--noise 1]
-                                              [--real-touch 6] [--quick]
+                                              [--real-touch 6] [--quick] [--sensor biotac_sp biotac]
 
 Runs (or reuses, in ``--out``) the slip-in-place grid — ``classic``: the 72 conditions of
 ``+experiment=slip_in_place_grid`` (6 directions 60° apart, both rotation senses, a touch × light
@@ -13,7 +13,9 @@ truth. Then it writes records of real touches (``tests/real_touch.py``: real con
 under the real resting noise, from the first frame and reached from rest; ``--real-touch`` frames
 per finger and grasp file) and counts how many read as touch.
 
-Prints JSON lines (per condition cell: tare/no tare × light/firm; the totals; the onset; the
+Each sensor model of ``--sensor`` (``conf/sensor/``; by default the BioTac SP and the classic
+BioTac, docs/sensors.md) runs the grid with its own fingertips, and its lines and tables are
+headed by its name. Prints JSON lines (per condition cell: tare/no tare × light/firm; the totals; the onset; the
 real touches), then markdown tables (docs/analysis.md):
 
 - the confusion matrix of the shipped estimate over the true motion (each translation
@@ -51,18 +53,20 @@ def angle_error(a, b) -> float:
     return abs((a - b + 180.0) % 360.0 - 180.0)
 
 
-def runs(out: Path, grid: str, noise: float, quick: bool):
-    """Yield (condition, store) for every run of the grid at ``noise``, running the missing ones."""
+def runs(out: Path, grid: str, noise: float, quick: bool, sensor: str = "biotac_sp"):
+    """Yield (condition, store) for every run of the grid at ``noise`` with the fingertips of the
+    sensor model ``sensor``, running the missing ones (the BioTac SP's in ``out/<grid>``, as
+    before; another model's in ``out/<sensor>/<grid>``)."""
     from tactile_flow.protocols.slip_grid import conditions, run_slip_in_place, varied_conditions
     conds = varied_conditions() if grid == "varied" else conditions()
     if quick:
         conds = conds[::4]
     for c in conds:
-        d = out / grid / f"noise{noise:g}" / c.name
+        d = (out if sensor == "biotac_sp" else out / sensor) / grid / f"noise{noise:g}" / c.name
         if not (d / "run.zarr").exists():
             shutil.rmtree(d, ignore_errors=True)
             try:
-                r = run_slip_in_place(d, c, noise=noise)
+                r = run_slip_in_place(d, c, noise=noise, overrides=[f"sensor={sensor}"])
             except Exception as exc:  # noqa: BLE001 - a condition the plan check refuses: said, skipped
                 print(json.dumps({"run": c.name, "status": "refused", "error": str(exc)}), file=sys.stderr)
                 continue
@@ -78,7 +82,7 @@ def evaluate(store: Path, model, cfg):
     from tactile_flow.analysis.pipeline import analyse
     from tactile_flow.analysis.score import score
     run = load_run(store)
-    a = analyse(run, cfg, model)
+    a = analyse(run, cfg, model if model is not None and model.sensor is run.sensor else None)   # the store's model
     sc = score(a, open_truth(store))
     row = (sc.get("object_motions") or [{}])[0]
     return row, a.slips.get(row.get("segment"))
@@ -213,20 +217,29 @@ def main(argv=None) -> None:
     ap.add_argument("--noise", type=float, nargs="+", default=[1.0])
     ap.add_argument("--real-touch", type=int, default=6, help="real contact frames per finger and grasp file (0: none)")
     ap.add_argument("--quick", action="store_true", help="every fourth condition")
+    ap.add_argument("--sensor", nargs="+", default=["biotac_sp", "biotac"],
+                    help="sensor models (conf/sensor/): the BioTac SP and the classic BioTac by default")
     args = ap.parse_args(argv)
+    for sensor in args.sensor:
+        print(f"\n## sensor {sensor}\n", flush=True)
+        bench(args, sensor)
+
+
+def bench(args, sensor: str) -> None:
+    """The benchmark of :func:`main` with the fingertips of the sensor model ``sensor``."""
     from tactile_flow.analysis.config import load_config
     from tactile_flow.analysis.pipeline import get_model
     from tactile_flow.protocols.slip_grid import DIRECTIONS_DEG
     cfg = load_config({"figures": False, "progress": False})
-    model = get_model(cfg.tactile)
+    model = get_model(cfg.tactile) if sensor == "biotac_sp" else None
     bins = DIRECTIONS_DEG if args.grid == "classic" else tuple(range(0, 360, 60))
     t0 = time.perf_counter()
     everything = []
     for noise in args.noise:
-        for c, store in runs(args.out, args.grid, noise, args.quick):
+        for c, store in runs(args.out, args.grid, noise, args.quick, sensor):
             tr, est = evaluate(store, model, cfg)
             everything.append((noise, c, tr, est))
-            print(json.dumps({"run": c.name, "noise": noise, "truth": true_label(c, bins),
+            print(json.dumps({"sensor": sensor, "run": c.name, "noise": noise, "truth": true_label(c, bins),
                               "read": read_label(*reread(est, cfg.slip), bins),
                               "onset_error_ms": None if not est or est.get("slip_onset_s") is None
                               or not math.isfinite(tr.get("true_slip_onset_s", float("nan")))
@@ -238,14 +251,16 @@ def main(argv=None) -> None:
         force = "light" if c.press_force < 3.0 else "firm"
         cells[("tare" if c.tare else "no tare", force)].append((c, tr, est))
     for (tare, force), cell in sorted(cells.items()):
-        print(json.dumps({"grid": args.grid, "tare": tare, "force": force, **summarise(cell, cfg, bins)}))
+        print(json.dumps({"sensor": sensor, "grid": args.grid, "tare": tare, "force": force,
+                          **summarise(cell, cfg, bins)}))
     total = summarise(rows, cfg, bins)
-    print(json.dumps({"grid": args.grid, "all": True, **total, "seconds": round(time.perf_counter() - t0, 1)}))
-    touch = real_touch(args.out, args.real_touch) if args.real_touch else None
+    print(json.dumps({"sensor": sensor, "grid": args.grid, "all": True, **total,
+                      "seconds": round(time.perf_counter() - t0, 1)}))
+    touch = real_touch(args.out, args.real_touch) if args.real_touch and sensor == "biotac_sp" else None   # real SPs
     if touch:
         print(json.dumps({"real_touch": touch}))
     fmt = lambda v: "–" if v is None else f"{100 * v:.0f} %"  # noqa: E731
-    print(f"\n{args.grid} grid, {len(rows)} runs: the shipped estimate\n")
+    print(f"\n{sensor}, {args.grid} grid, {len(rows)} runs: the shipped estimate\n")
     print(markdown_confusion(*confusion(rows, cfg, bins)))
     for (tare, force), cell in sorted(cells.items()):
         print(f"\n{tare}, {force} ({len(cell)} runs)\n")

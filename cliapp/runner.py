@@ -153,8 +153,10 @@ def error_line(exc: BaseException, step_fields=None) -> str:
     in place of Hydra's hint to add it with ``+`` (which the run's checks would refuse)."""
     config_error = as_config_error(exc, step_fields)
     if config_error is not None:
-        where = origin(config_error.key)
-        return (f"{where[0]} line {where[1]}: " if where else "") + str(config_error)
+        where, said = origin(config_error.key), str(config_error)
+        if where and said.startswith(f"{where[0]}: "):       # an error that names its own file (a sensor file's)
+            said = said[len(where[0]) + 2:]
+        return (f"{where[0]} line {where[1]}: " if where else "") + said
     missing = re.search(r"Could not find '([\w/]+)/([^']+)'", str(exc))
     if missing:                                   # a group option that does not exist
         group, name = missing.groups()

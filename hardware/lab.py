@@ -130,20 +130,21 @@ def emulated_board(cfg: LabConfig) -> dict | None:
         return None
 
 
-def make_real_lab(hw_cfg, surface_cfg=None, *, key: str = "hardware") -> Lab:
+def make_real_lab(hw_cfg, surface_cfg=None, *, key: str = "hardware", sensor=None) -> Lab:
     """Build the lab of ``conf/hardware/lab.yaml``; devices are returned unconnected.
 
     ``hw_cfg``: a :class:`LabConfig`, or a dict or OmegaConf node (checked by
     :func:`load_lab_config`); ``surface_cfg``: as ``conf/surface/*.yaml`` (geometry shared with
-    the simulator), or None.
+    the simulator), or None; ``sensor``: the fingertips' :class:`tactile.sensor.SensorModel`
+    (None: the BioTac SP).
     """
     from .ur10 import UR10Arm
 
     cfg = load_lab_config(hw_cfg, key)
     clock = WallClock()
     surface = load_surface(surface_cfg) if surface_cfg is not None else None
-    biotac = (SerialBiotacs(cfg.biotac, clock) if isinstance(cfg.biotac, SerialBiotacConfig)
-              else RosbridgeBiotacs(cfg.biotac, clock))
+    biotac = (SerialBiotacs(cfg.biotac, clock, sensor) if isinstance(cfg.biotac, SerialBiotacConfig)
+              else RosbridgeBiotacs(cfg.biotac, clock, sensor))
     return Lab(arm=UR10Arm(cfg.arm.driver), hand=ShadowHand(cfg.hand, clock), biotac=biotac,
                pump=SerialPump(cfg.pump, clock), scale=SerialScale(cfg.scale, clock),
                clock=clock, surface=surface)

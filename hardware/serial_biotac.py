@@ -1,9 +1,10 @@
-"""BioTac SP sensors read from a microcontroller bridge over a serial line (pyserial).
+"""BioTac sensors read from a microcontroller bridge over a serial line (pyserial).
 
 The bridge samples up to five BioTacs and sends one binary frame per 100 Hz period; the
 format (sync bytes, header with length and sequence number, per-finger payload, CRC-16)
 is specified in ``docs/serial_protocol.md`` and implemented by :func:`encode_frame` and
-:class:`FrameParser`. :class:`SerialBiotacs` opens the port (any pyserial URL: a device
+:class:`FrameParser`. Each finger's payload holds as many electrodes as the sensor model has
+taxels (24 on a BioTac SP, 19 on a classic BioTac); the parser is told how many. :class:`SerialBiotacs` opens the port (any pyserial URL: a device
 path, a pty, ``loop://``, ``socket://host:port``), reads it on its own thread, and buffers
 decoded frames, so :meth:`~SerialBiotacs.read` and :meth:`~SerialBiotacs.latest` never
 block the recorder or the run engine.
@@ -33,7 +34,7 @@ HEADER = struct.Struct("<2sBBBBHIQ")      # sync, version, finger mask, n_pac, f
 HEADER_SIZE = HEADER.size                 # 20 bytes
 CRC_SIZE = 2
 MAX_PAC = 44                              # PAC samples per finger and frame (2 frame periods of 2.2 kHz)
-CHANNELS = N_TAXELS + 3                   # electrodes, pdc, tdc, tac (before the PAC samples)
+CHANNELS = N_TAXELS + 3                   # electrodes, pdc, tdc, tac (before the PAC samples), BioTac SP
 
 
 def crc16(data: bytes) -> int:
@@ -53,13 +54,13 @@ def fingers_of(mask: int) -> tuple[str, ...]:
 def encode_frame(seq: int, device_time_us: int, fingers, electrodes, pdc, tdc, tac, pac) -> bytes:
     """One wire frame (see ``docs/serial_protocol.md``).
 
-    ``fingers``: names in Shadow order (F of them); ``electrodes`` (F, 24), ``pdc``/``tdc``/
-    ``tac`` (F,), ``pac`` (F, n_pac) counts as int16; ``seq`` uint32 (wraps);
-    ``device_time_us`` the bridge clock (µs, uint64).
+    ``fingers``: names in Shadow order (F of them); ``electrodes`` (F, N) (N per the sensor
+    model), ``pdc``/``tdc``/``tac`` (F,), ``pac`` (F, n_pac) counts as int16; ``seq`` uint32
+    (wraps); ``device_time_us`` the bridge clock (µs, uint64).
     """
     F = len(fingers)
     pac = np.asarray(pac, np.int16).reshape(F, -1)
-    block = np.concatenate([np.asarray(electrodes, np.int16).reshape(F, N_TAXELS),
+    block = np.concatenate([np.asarray(electrodes, np.int16).reshape(F, -1),
                             np.stack([np.asarray(a, np.int16).reshape(F) for a in (pdc, tdc, tac)], 1),
                             pac], axis=1).astype("<i2").tobytes()
     head = HEADER.pack(SYNC, VERSION, mask_of(fingers), pac.shape[1], 0, len(block),
@@ -75,7 +76,7 @@ class WireFrame:
     seq: int
     device_time_us: int
     fingers: tuple[str, ...]
-    electrodes: np.ndarray     # (F, 24) int16
+    electrodes: np.ndarray     # (F, N) int16
     pdc: np.ndarray            # (F,) int16
     tdc: np.ndarray
     tac: np.ndarray
@@ -107,12 +108,17 @@ class FrameParser:
 
     On a CRC failure the parser advances past the failed sync only (not the whole claimed
     length), so a good frame that starts inside a truncated or corrupt one is still found.
+    ``n_electrodes``: electrodes per finger (the sensor model's taxels). A header whose
+    length fits another count is refused like any false sync; that count is kept in
+    :attr:`other_count` (a bridge of another sensor model: ``connect()`` says so).
     """
 
-    def __init__(self):
+    def __init__(self, n_electrodes: int = N_TAXELS):
         self.buf = bytearray()
         self.stats = ParserStats()
         self._last_seq: int | None = None
+        self.n_electrodes = int(n_electrodes)
+        self.other_count: int | None = None
 
     def feed(self, data: bytes) -> list[WireFrame]:
         """Append ``data``; return every complete, valid frame it finishes (oldest first)."""
@@ -140,7 +146,11 @@ class FrameParser:
             return None, False
         _, version, mask, n_pac, _flags, length, seq, t_us = HEADER.unpack_from(buf)
         F = bin(mask).count("1")
-        if version != VERSION or not 0 < mask < 32 or n_pac > MAX_PAC or length != F * (CHANNELS + n_pac) * 2:
+        channels = self.n_electrodes + 3
+        if version != VERSION or not 0 < mask < 32 or n_pac > MAX_PAC or length != F * (channels + n_pac) * 2:
+            per_finger = length / (2 * F) - 3 - n_pac if F else 0
+            if version == VERSION and 0 < mask < 32 and n_pac <= MAX_PAC and per_finger > 0 and per_finger == int(per_finger):
+                self.other_count = int(per_finger)
             self.stats.garbage_bytes += 1                     # a false sync inside garbage
             del buf[:1]
             return None, True
@@ -155,12 +165,13 @@ class FrameParser:
                 self.stats.corrupt += 1
             del buf[:2]
             return None, True
-        block = np.frombuffer(bytes(buf[HEADER_SIZE:HEADER_SIZE + length]), "<i2").reshape(F, CHANNELS + n_pac)
+        block = np.frombuffer(bytes(buf[HEADER_SIZE:HEADER_SIZE + length]), "<i2").reshape(F, channels + n_pac)
         del buf[:total]
         self._count_seq(seq)
         block = block.astype(np.int16)
-        return WireFrame(seq, t_us, fingers_of(mask), block[:, :N_TAXELS], block[:, N_TAXELS],
-                         block[:, N_TAXELS + 1], block[:, N_TAXELS + 2], block[:, CHANNELS:]), True
+        n = self.n_electrodes
+        return WireFrame(seq, t_us, fingers_of(mask), block[:, :n], block[:, n],
+                         block[:, n + 1], block[:, n + 2], block[:, channels:]), True
 
     def _count_seq(self, seq: int) -> None:
         self.stats.frames += 1
@@ -216,14 +227,16 @@ def open_serial(port: str, baudrate: int, who: str, key: str, timeout: float = 0
 
 
 class SerialBiotacs(TactileSensors):
-    """BioTacs on a serial bridge: a reader thread decodes frames into a bounded buffer."""
+    """BioTacs on a serial bridge: a reader thread decodes frames into a bounded buffer
+    (``sensor``: their :class:`tactile.sensor.SensorModel`, default the BioTac SP)."""
 
-    model = "BioTac SP via serial bridge"
-
-    def __init__(self, cfg: SerialBiotacConfig, clock: Clock | None = None):
+    def __init__(self, cfg: SerialBiotacConfig, clock: Clock | None = None, sensor=None):
         self.cfg = cfg
+        if sensor is not None:
+            self.sensor_model = sensor
+        self.model = f"{self.sensor_model.name} via serial bridge"
         self.clock = clock or WallClock()
-        self.parser = FrameParser()
+        self.parser = FrameParser(self.sensor_model.n_taxels)
         self._serial = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -319,6 +332,11 @@ class SerialBiotacs(TactileSensors):
         if not self._first.wait(self.cfg.first_frame_timeout_s):
             if self._lost:
                 raise DeviceDisconnectedError(self._lost)
+            if self.parser.other_count is not None:
+                m = self.sensor_model
+                raise DeviceFaultError(f"{self.kind}: the bridge on {self.cfg.port} sends {self.parser.other_count} "
+                                       f"electrodes per sensor; the sensor model {m.name} has {m.n_taxels} (run "
+                                       f"with the sensor=... of these fingertips)")
             raise DeviceTimeoutError(
                 f"{self.kind}: no valid frame on {self.cfg.port} within {self.cfg.first_frame_timeout_s} s "
                 f"(stats {self.stats}); hint: is the bridge powered and streaming, at {self.cfg.baudrate} baud?")
@@ -366,7 +384,7 @@ class SerialBiotacs(TactileSensors):
         frame = BiotacFrame(seq=wf.seq, device_time=wf.device_time_us * 1e-6, host_time=host_time,
                             electrodes=wf.electrodes[rows], pdc=wf.pdc[rows].astype(np.int32),
                             tdc=wf.tdc[rows].astype(np.int32), tac=wf.tac[rows].astype(np.int32),
-                            pac=wf.pac[rows])
+                            pac=wf.pac[rows], counts_max=self.sensor_model.counts_max)
         self._buffer.put(frame)
         self._latest = frame
         self._publish(frame)

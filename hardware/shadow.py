@@ -8,7 +8,9 @@
   ``electrodes[]``, Shadow finger order). The header stamp is the frame's device time and
   ``header.seq`` its sequence number. A finger without a sensor reads ``pdc = -22072`` and
   zeros elsewhere: it is reported in :attr:`RosbridgeBiotacs.unconnected`, and ``connect()``
-  refuses a configuration that asks to record one.
+  refuses a configuration that asks to record one. Each sensor's ``electrodes[]`` holds as
+  many counts as the sensor model has taxels (24 on a BioTac SP, 19 on a classic BioTac);
+  a message with another count is malformed, and ``connect()`` says so when every one is.
 
 Messages arrive on roslibpy's thread and are buffered; nothing the recorder or the engine
 calls waits on the network. A lost websocket or a silent stream becomes a typed error.
@@ -23,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .biotac import FINGERS, N_TAXELS, BiotacFrame, TactileSensors, check_fingers
+from .biotac import FINGERS, BiotacFrame, TactileSensors, check_fingers
 from .device import Clock, DeviceIdentity, SampleBuffer, WallClock
 from .errors import (BUFFER_RANGE_S, RATE_RANGE_HZ, ConfigError, DeviceDisconnectedError, DeviceFaultError,
                      DeviceTimeoutError, NotConnectedError, SafetyError, require_positive, require_within)
@@ -314,12 +316,16 @@ class RosbridgeBiotacConfig:
 
 
 class RosbridgeBiotacs(_RosbridgeDevice, TactileSensors):
-    """BioTac SP frames from the Shadow Hand's driver over rosbridge."""
+    """BioTac frames from the Shadow Hand's driver over rosbridge (``sensor``: their
+    :class:`tactile.sensor.SensorModel`, default the BioTac SP)."""
 
-    model = "BioTac SP via Shadow driver (rosbridge)"
-
-    def __init__(self, cfg: RosbridgeBiotacConfig, clock: Clock | None = None):
+    def __init__(self, cfg: RosbridgeBiotacConfig, clock: Clock | None = None, sensor=None):
         self.cfg = cfg
+        if sensor is not None:
+            self.sensor_model = sensor
+        self.model = f"{self.sensor_model.name} via Shadow driver (rosbridge)"
+        self.wrong_count: int | None = None
+        """Electrodes per sensor of the last message whose count is not the model's (else None)."""
         self._init_link(cfg.rosbridge, clock)
         self._frames = _Stream(int(cfg.buffer_s * cfg.rate_hz))
         self._rows = [FINGERS.index(f) for f in cfg.fingers]
@@ -352,7 +358,15 @@ class RosbridgeBiotacs(_RosbridgeDevice, TactileSensors):
         self.conn = RosbridgeConnection(self.rb_cfg, self.kind).open()
         try:
             self.conn.subscribe(self.cfg.topic, "sr_robot_msgs/BiotacAll", self._on_frame)
-            self._await_first(self._frames, self.cfg.first_frame_timeout_s, self.cfg.topic)
+            try:
+                self._await_first(self._frames, self.cfg.first_frame_timeout_s, self.cfg.topic)
+            except DeviceTimeoutError:
+                if self.wrong_count is None:
+                    raise
+                m = self.sensor_model
+                raise DeviceFaultError(f"{self.kind}: {self.cfg.topic} sends {self.wrong_count} electrodes per "
+                                       f"sensor; the sensor model {m.name} has {m.n_taxels} (run with the "
+                                       f"sensor=... of these fingertips)") from None
             self._check_fingers()
         except Exception:
             self.close()
@@ -409,8 +423,8 @@ class RosbridgeBiotacs(_RosbridgeDevice, TactileSensors):
         for i, t in enumerate(tactiles[:len(FINGERS)]):
             if isinstance(t, dict) and t.get("pdc") == UNCONNECTED_PDC:
                 self.unconnected.add(FINGERS[i])
-        F = len(self._rows)
-        electrodes = np.zeros((F, N_TAXELS), np.int16)
+        F, n = len(self._rows), self.sensor_model.n_taxels
+        electrodes = np.zeros((F, n), np.int16)
         channels = {name: np.zeros(F, np.int32) for name in ("pdc", "tdc", "tac")}
         pacs = []
         for k, r in enumerate(self._rows):
@@ -418,10 +432,13 @@ class RosbridgeBiotacs(_RosbridgeDevice, TactileSensors):
             if not isinstance(t, dict):
                 raise WireError("tactiles: a reading is not a mapping", f"tactiles[{r}] ({who}): got {_brief(t)}")
             e = counts(t.get("electrodes") or [], f"{who} electrodes")
-            if e.ndim != 1 or len(e) > N_TAXELS:
-                raise WireError("electrodes: not a list of counts",
-                                f"{who} electrodes: got {len(e)} values; expected {N_TAXELS}")
-            electrodes[k, :len(e)] = e
+            if e.ndim != 1:
+                raise WireError("electrodes: not a list of counts", f"{who} electrodes: got {_brief(e)}")
+            if len(e) != n:                      # another sensor model's fingertips (connect says which)
+                self.wrong_count = len(e)
+                raise WireError("electrodes: wrong count", f"{who} electrodes: got {len(e)} values; expected "
+                                                           f"{n} (sensor model {self.sensor_model.name})")
+            electrodes[k] = e
             for name in channels:
                 if name not in t:
                     raise WireError(f"{name}: missing", f"{who}: no {name}")
@@ -439,4 +456,5 @@ class RosbridgeBiotacs(_RosbridgeDevice, TactileSensors):
         self._count += 1
         return BiotacFrame(seq=seq, device_time=device_time, host_time=host, electrodes=electrodes,
                            pdc=channels["pdc"], tdc=channels["tdc"], tac=channels["tac"],
-                           pac=np.array([p[:n_pac] for p in pacs], np.int16))
+                           pac=np.array([p[:n_pac] for p in pacs], np.int16),
+                           counts_max=self.sensor_model.counts_max)

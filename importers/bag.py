@@ -6,7 +6,9 @@ Per message (one frame of the five Shadow ports, ``tactiles[0..4]`` = ff, mf, rf
 - ``header.seq`` → ``seq`` (ROS1); ROS2 headers have no ``seq``, so the message index is used
   (noted in ``meta["seq_source"]``);
 - the bag's record (receive) time → ``host_time`` (s);
-- ``electrodes[24]``, ``pdc``, ``tdc``, ``tac`` per finger;
+- ``electrodes[N]``, ``pdc``, ``tdc``, ``tac`` per finger: N = 24 for BioTac SPs, 19 for classic
+  BioTacs (the count chooses the sensor model unless ``sensor=`` gives it; a port without a
+  sensor may send another length, read as zeros);
 - PAC: ``pac[]`` when the message has it and it is non-empty (the frame's whole 2.2 kHz
   batch), else ``[pac0, pac1]`` (older messages: the two samples Shadow's driver keeps).
 
@@ -31,7 +33,7 @@ from typing import Iterator
 
 import numpy as np
 
-from tactile_flow.hardware.biotac import FINGERS, N_TAXELS
+from tactile_flow.hardware.biotac import FINGERS
 
 from .recording import CHUNK_FRAMES, ImportInputError, Recording, check_rate, concat
 from .ros1 import Ros1Read, ros1_messages
@@ -99,13 +101,17 @@ class BagFile:
 
     :class:`ImportInputError` (one sentence naming the file) when the bag cannot be read, is
     corrupt, has no such topic (the message lists the topics it has), the topic has another
-    type or no messages, or a message does not have five sensors with 24 electrodes each.
+    type or no messages, or a message does not have five sensors with the same number of
+    electrodes (that of ``sensor``, a :class:`tactile.sensor.SensorModel`, when given; else the
+    first message's: :attr:`n_taxels` once read).
     """
 
     finger_names = FINGERS
 
-    def __init__(self, path, topic: str = TOPIC, rate_hz: float | None = None):
+    def __init__(self, path, topic: str = TOPIC, rate_hz: float | None = None, sensor=None):
         path = Path(path)
+        self.sensor = sensor
+        self.n_taxels: int | None = sensor.n_taxels if sensor is not None else None
         if path.suffix in (".db3", ".mcap") and (path.parent / "metadata.yaml").is_file():
             path = path.parent                   # a ROS2 bag's storage file: read the bag
         self.path, self.topic, self.rate_hz = path, topic, rate_hz
@@ -214,7 +220,9 @@ class BagFile:
             if n == 0:
                 has_seq = hasattr(h, "seq")
                 frame_id = str(getattr(h, "frame_id", ""))
-            if _add_frame(cols, msg, t_ns, n, has_seq, self.path):
+            if n == 0 and self.n_taxels is None:
+                self.n_taxels = _electrode_count(msg, self.path)
+            if _add_frame(cols, msg, t_ns, n, has_seq, self.path, self.n_taxels, self.sensor):
                 pac_source = "pac[]"
             n += 1
             if len(cols.seq) == frames:
@@ -225,7 +233,7 @@ class BagFile:
         if cols.seq:
             yield cols.recording(self.meta)
         self.meta.update(messages=n, seq_source="header.seq" if has_seq else "message index (ROS2 headers have no seq)",
-                         pac_source=pac_source, frame_id=frame_id)
+                         pac_source=pac_source, frame_id=frame_id, electrodes=self.n_taxels)
         truncated = info.truncation(n) if info else None
         if truncated:
             self.meta["truncated"] = truncated
@@ -235,8 +243,21 @@ class BagFile:
         check_rate(rate_hz, self.rate_hz, f"{self.path}: header stamps of {self.topic}")
 
 
-def _add_frame(cols: _Columns, msg, t_ns: int, i: int, has_seq: bool, path: Path) -> bool:
+def _electrode_count(msg, path: Path) -> int:
+    """Electrodes per sensor of a message: the length of the connected sensors' ``electrodes``."""
+    from .recording import UNCONNECTED_PDC
+    lengths = {len(b.electrodes) for b in msg.tactiles if b.pdc != UNCONNECTED_PDC} or \
+        {len(b.electrodes) for b in msg.tactiles}
+    if len(lengths) != 1:
+        raise ImportInputError(f"{path}: message 0 has sensors with {sorted(lengths)} electrodes; expected the "
+                               f"same number for every sensor")
+    return lengths.pop()
+
+
+def _add_frame(cols: _Columns, msg, t_ns: int, i: int, has_seq: bool, path: Path, n_taxels: int,
+               sensor=None) -> bool:
     """Append message ``i`` to ``cols``; True when its PAC came from ``pac[]``."""
+    from .recording import UNCONNECTED_PDC
     h = msg.header
     cols.seq.append(int(h.seq) if has_seq else i)
     cols.stamp.append(h.stamp.sec + h.stamp.nanosec * 1e-9)
@@ -245,10 +266,12 @@ def _add_frame(cols: _Columns, msg, t_ns: int, i: int, has_seq: bool, path: Path
     if len(tact) != len(FINGERS):
         raise ImportInputError(f"{path}: message {i} has {len(tact)} sensors, expected {len(FINGERS)} "
                                f"({', '.join(FINGERS)})")
-    e = [np.asarray(b.electrodes) for b in tact]
-    if any(len(a) != N_TAXELS for a in e):
-        raise ImportInputError(f"{path}: message {i} has {sorted({len(a) for a in e})} electrodes per sensor, "
-                               f"expected {N_TAXELS} (BioTac SP)")
+    e = [np.asarray(b.electrodes) if len(b.electrodes) == n_taxels or b.pdc != UNCONNECTED_PDC
+         else np.zeros(n_taxels, np.int64) for b in tact]            # a port without a sensor: zeros
+    if any(len(a) != n_taxels for a in e):
+        whose = f"sensor={sensor.name} has" if sensor is not None else "the first message has"
+        lengths = sorted({len(b.electrodes) for b in tact if b.pdc != UNCONNECTED_PDC} or {len(a) for a in e})
+        raise ImportInputError(f"{path}: message {i} has {lengths} electrodes per sensor; {whose} {n_taxels}")
     cols.el.append(e)
     cols.pdc.append([b.pdc for b in tact])
     cols.tdc.append([b.tdc for b in tact])
@@ -269,11 +292,11 @@ def _biotac_types() -> dict:
     return types
 
 
-def read_bag(path, topic: str = TOPIC) -> Recording:
+def read_bag(path, topic: str = TOPIC, sensor=None) -> Recording:
     """Every ``BiotacAll`` message on ``topic`` of the bag at ``path`` as one :class:`Recording`
     with all five fingers (in memory: for small bags and tests; the import streams the bag with
     :class:`BagFile`). Errors as :class:`BagFile`."""
-    reader = BagFile(path, topic)
+    reader = BagFile(path, topic, sensor=sensor)
     rec = concat(reader.chunks())
     return replace(rec, meta=dict(reader.meta))
 

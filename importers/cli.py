@@ -21,6 +21,7 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import OmegaConf
 
 from tactile_flow.cliapp.runner import report, run_app
+from tactile_flow.cliapp.sensors import composed_sensor
 from tactile_flow.conf import DIR as CONF_DIR
 from tactile_flow.runstore.status import ExitCode
 
@@ -37,11 +38,17 @@ def settings_from(cfg) -> ImportSettings:
     if fingers is not None:
         fingers = (str(fingers),) if isinstance(fingers, str) else tuple(str(f) for f in fingers)
     est = cfg.get("estimate") or {}
+    columns = cfg.get("columns")
+    columns = OmegaConf.to_container(columns) if OmegaConf.is_config(columns) else columns
+    relative = cfg.get("relative", "auto")
     return ImportSettings(rate_hz=cfg.get("rate_hz"), calibration=cfg.get("calibration"),
                           baseline=str(cfg.get("baseline", "auto")), fingers=fingers or None,
                           topic=str(cfg.get("topic", "/rh/tactile")),
                           estimate_early_s=float(est.get("early_s", 1.0)),
-                          estimate_percentile=float(est.get("percentile", 95.0)))
+                          estimate_percentile=float(est.get("percentile", 95.0)),
+                          sensor=composed_sensor(cfg, default=None), columns=columns,
+                          time_unit=str(cfg.get("time_unit", "auto")), relative=relative,
+                          relative_rest_counts=cfg.get("relative_rest_counts", 2500.0))
 
 
 def run(cfg, overrides=(), console=print) -> int:

@@ -19,15 +19,19 @@ from __future__ import annotations
 
 import importlib.metadata
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
+
+import numpy as np
 
 from tactile_flow.runstore.clockmodel import OnlineClockModel
 from tactile_flow.runstore.provenance import collect
+from tactile_flow.tactile.sensor import SensorModelError, sensor_for_taxels
+from tactile_flow.tactile.signals import SensorCalibration
 
 from .bag import TOPIC, BagFile
 from .baseline import Baseline, EarlyWindow, estimate_baseline, load_calibration
-from .csv import GAP_FACTOR, CsvFile
+from .csv import GAP_FACTOR, RELATIVE_REST_COUNTS, TIME_UNITS, CsvFile
 from .recording import (CHUNK_FRAMES, Connectivity, ImportInputError, PreparedSource, Reader, Recording, Scan,
                         decide_fingers, keep_fingers, parse_rate)
 from .sources import Source, checksum, discover, sha256_file
@@ -49,6 +53,13 @@ class ImportSettings:
         estimate_early_s, estimate_percentile: see :func:`.baseline.estimate_baseline`.
         chunk_frames: frames read and written at a time (the memory bound; also the most
             frames of one file's early window).
+        sensor: the :class:`tactile.sensor.SensorModel` of the recording (``None``: chosen by
+            each file's electrode count, :func:`tactile.sensor.sensor_for_taxels`).
+        columns: CSV column renames ``{name in the file: canonical name}`` (:mod:`.csv`).
+        time_unit: a CSV time column's unit: ``auto`` (its name, else guessed from its steps),
+            ``s``, ``ms``, ``us``, ``ns``.
+        relative: CSV electrode values relative to rest: ``auto`` (detected), True, False;
+            ``relative_rest_counts``: the rest they are added to without a calibration.
     """
 
     rate_hz: float | None = None
@@ -59,6 +70,11 @@ class ImportSettings:
     estimate_early_s: float = 1.0
     estimate_percentile: float = 95.0
     chunk_frames: int = CHUNK_FRAMES
+    sensor: object = None
+    columns: dict | None = None
+    time_unit: str = "auto"
+    relative: object = "auto"
+    relative_rest_counts: float = RELATIVE_REST_COUNTS
 
 
 @dataclass
@@ -79,15 +95,18 @@ class ImportResult:
     baseline: str
     warnings: list[str] = field(default_factory=list)
     subfolder: str = ""
+    sensor: str = ""
+    notes: list[str] = field(default_factory=list)
 
 
 def open_source(src: Source, settings: ImportSettings) -> Reader:
     """The chunk reader of one source (:class:`.bag.BagFile` or :class:`.csv.CsvFile`)."""
     if src.kind == "bag":
-        return BagFile(src.path, settings.topic, settings.rate_hz)
+        return BagFile(src.path, settings.topic, settings.rate_hz, settings.sensor)
     # an unprefixed (one-sensor) file is the finger named by fingers=[x], else ff
     finger = settings.fingers[0] if settings.fingers and len(settings.fingers) == 1 else "ff"
-    return CsvFile(src.path, settings.rate_hz, finger)
+    return CsvFile(src.path, settings.rate_hz, finger, sensor=settings.sensor, columns=settings.columns,
+                   time_unit=settings.time_unit, relative=settings.relative, rest_counts=settings.relative_rest_counts)
 
 
 def scan(reader: Reader, early_s: float = 1.0, frames: int = CHUNK_FRAMES) -> Scan:
@@ -119,6 +138,16 @@ def check_settings(settings: ImportSettings) -> None:
         raise ImportInputError(f"chunk_frames={frames!r}: expected a positive whole number of frames")
     if settings.baseline not in BASELINES:
         raise ImportInputError(f"baseline={settings.baseline!r}: expected one of {', '.join(BASELINES)}")
+    if settings.time_unit not in ("auto", *TIME_UNITS):
+        raise ImportInputError(f"time_unit={settings.time_unit!r}: expected auto, {', '.join(TIME_UNITS)}")
+    if settings.relative not in ("auto", True, False):
+        raise ImportInputError(f"relative={settings.relative!r}: expected auto, true or false")
+    rest = settings.relative_rest_counts
+    if isinstance(rest, bool) or not isinstance(rest, (int, float)) or not 1 <= rest <= 4094:
+        raise ImportInputError(f"relative_rest_counts={rest!r}: expected a count within 1..4094")
+    if settings.columns is not None and not isinstance(settings.columns, dict):
+        raise ImportInputError(f"columns={settings.columns!r}: expected a mapping {{name in the file: canonical "
+                               f"name}}")
     parse_rate(settings.rate_hz)
 
 
@@ -126,11 +155,63 @@ def prepare(src: Source, settings: ImportSettings) -> PreparedSource:
     """Open and scan one source (the first pass) and decide its fingers (see
     :func:`.recording.decide_fingers`)."""
     reader = open_source(src, settings)
-    found = scan(reader, settings.estimate_early_s, settings.chunk_frames)
     where = str(reader.meta.get("path", src.path))
+    if isinstance(reader, CsvFile) and settings.calibration and settings.relative is not False:
+        try:                    # relative values are relative to the calibration's rest, when it covers the file
+            cal = load_calibration(settings.calibration, reader.finger_names)
+            reader.set_rest(cal.counts(reader.finger_names, where))
+        except ImportInputError:
+            if settings.relative is True:
+                raise
+    found = scan(reader, settings.estimate_early_s, settings.chunk_frames)
     decision = decide_fingers(found.fingers, found.unconnected, settings.fingers, where)
     kept = tuple(f for f in found.fingers if f in decision["kept"])
-    return PreparedSource(reader, found, kept, decision, settings.chunk_frames)
+    sensor, how = file_sensor(reader, settings.sensor, where)
+    _check_channels(found, sensor, where)
+    prepared = PreparedSource(reader, found, kept, decision, settings.chunk_frames, sensor=sensor, sensor_how=how)
+    return prepared
+
+
+def file_sensor(reader: Reader, requested, where: str):
+    """``(model, how)``: the sensor model of a file — ``requested`` (its electrode count was
+    checked while reading), or the one built-in model with the file's electrode count
+    (:func:`tactile.sensor.sensor_for_taxels`: one line listing the models and their counts
+    when none has it)."""
+    n = reader.n_taxels
+    if requested is not None:
+        return requested, f"sensor={requested.name}"
+    try:
+        model = sensor_for_taxels(n)
+    except SensorModelError as exc:
+        raise ImportInputError(f"{where}: {exc.message}; give sensor=FILE.yaml for another model") from None
+    return model, f"inferred from {n} electrodes per sensor"
+
+
+def _check_channels(found: Scan, sensor, where: str) -> None:
+    """Refuse a file holding a channel its sensor model does not have (nowhere to store it)."""
+    roles = {"pdc": "pressure", "tdc": "temperature", "tac": "temperature_change", "pac": "vibration"}
+    for c in found.channels:
+        if sensor.channel(roles[c]) is None:
+            raise ImportInputError(f"{where}: the file has {c}, but the sensor model {sensor.name} has no "
+                                   f"{roles[c].replace('_', ' ')} channel ({sensor.file or 'its file'}); "
+                                   f"expected a file without it, or another sensor=")
+
+
+def relative_baseline(p: PreparedSource) -> Baseline | None:
+    """The baseline of a file whose electrode values are relative to rest: that rest (module
+    :mod:`.csv`), which the values were added to; ``None`` for other files."""
+    reader = p.reader
+    if not getattr(reader, "relative", False):
+        return None
+    rest = np.broadcast_to(np.asarray(reader.rest, float), (len(reader.finger_names), p.sensor.n_taxels))
+    cals = {f: SensorCalibration(np.clip(rest[k], 1, p.sensor.counts_max), f"relative-{f}",
+                                 "the rest the file's relative values were added to")
+            for k, f in enumerate(reader.finger_names)}
+    nominal = np.asarray(reader.rest).ndim == 0
+    how = (f"a nominal {float(reader.rest):g} counts per electrode (relative_rest_counts; give calibration= for "
+           f"the sensors' own)" if nominal else "the calibration file's counts")
+    return Baseline("relative", cals, f"the file's values are relative to rest: rest = {how}",
+                    {"nominal": nominal, "rest_counts": float(reader.rest) if nominal else None})
 
 
 def choose_baseline(settings: ImportSettings, recs: list[Recording], names: list[str]) -> Baseline | None:
@@ -200,12 +281,21 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
     good = [src for src in sources if src in prepared]
     heads = [keep_fingers(prepared[src].scan.head, prepared[src].fingers) for src in good]
     baseline = choose_baseline(settings, heads, [str(src.path) for src in good])
-    if baseline is not None:
-        for src in good:
-            baseline.counts(prepared[src].fingers, where=str(src.path))       # every finger covered
+    own = {src: relative_baseline(prepared[src]) for src in good}              # relative values: their rest
+    for src in good:
+        b = own[src] or baseline
+        if b is not None:
+            counts = b.counts(prepared[src].fingers, where=str(src.path))      # every finger covered
+            n = prepared[src].sensor.n_taxels
+            if counts.shape[1] != n:
+                raise ImportInputError(f"{src.path}: the {b.method.replace('_', ' ')} baseline has {counts.shape[1]} "
+                                       f"counts per finger; the sensor model {prepared[src].sensor.name} has {n} "
+                                       f"electrodes")
     _check_targets(out, targets)
+    options = {f.name: getattr(settings, f.name) for f in fields(settings) if f.name != "sensor"}
     config_yaml = config_yaml if config_yaml is not None else json.dumps(
-        {"source": str(source), "out": str(out), **asdict(settings)}, indent=1)
+        {"source": str(source), "out": str(out), **options,
+         "sensor": settings.sensor.name if settings.sensor is not None else None}, indent=1)
     missing_dirs = sorted({d for t in targets for d in (t.parent, *t.parent.parents) if not d.exists()},
                           key=lambda d: -len(d.parts))                  # made by staging; removed on error
     staged, written, results = [], [], []
@@ -214,9 +304,10 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
             p, target = prepared[src], src.target(out)
             staging = staging_dir(target)
             staged.append(staging)
-            import_attrs, prov = run_metadata(src, p, baseline, config_yaml, overrides, len(good))
+            b = own[src] or baseline
+            import_attrs, prov = run_metadata(src, p, b, config_yaml, overrides, len(good))
             try:
-                summary = write_run(p, staging, prov, import_attrs, baseline)    # second pass
+                summary = write_run(p, staging, prov, import_attrs, b)           # second pass
             except ImportInputError as exc:         # found while writing (a rate that disagrees, a changed file)
                 if len(sources) == 1:
                     raise
@@ -226,8 +317,9 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
             written.append((staging, target))
             results.append(ImportResult(str(src.path), import_attrs["sha256"], str(target),
                                         str(target / "run.zarr"), list(p.fingers), p.decision["dropped"],
-                                        p.scan.frames, summary["rate_hz"], baseline.method if baseline else "none",
-                                        reader_warnings(p.reader.meta), src.subfolder))
+                                        p.scan.frames, summary["rate_hz"], b.method if b else "none",
+                                        reader_warnings(p.reader.meta), src.subfolder,
+                                        f"{p.sensor.name} ({p.sensor_how})", reader_notes(p.reader.meta)))
         publish(written)
     except BaseException:
         discard(staged)
@@ -244,8 +336,8 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
         for r in results:
             dropped = f", dropped {', '.join(f'{f} ({why})' for f, why in r.dropped.items())}" if r.dropped else ""
             console(f"imported {r.source} -> {r.store}: {r.frames} frames at {r.rate_hz:.4g} Hz, "
-                    f"fingers {', '.join(r.fingers)}{dropped}; baseline: {r.baseline}"
-                    + "".join(f"; WARNING: {w}" for w in r.warnings))
+                    f"fingers {', '.join(r.fingers)}{dropped}; sensor {r.sensor}; baseline: {r.baseline}"
+                    + "".join(f"; {n}" for n in r.notes) + "".join(f"; WARNING: {w}" for w in r.warnings))
     if failures:
         raise ImportIncomplete(results, failures)
     return results
@@ -273,6 +365,18 @@ def reader_warnings(meta: dict) -> list[str]:
     return out
 
 
+def reader_notes(meta: dict) -> list[str]:
+    """What a reader guessed about a file, to say on the output line: a time unit it guessed,
+    values it found relative to rest."""
+    out = []
+    if str(meta.get("time_unit_source", "")).startswith("guessed"):
+        out.append(f"time column in {meta['time_unit']} ({meta['time_unit_source']}; time_unit= to change)")
+    if meta.get("relative_to_rest"):
+        out.append(f"electrode values relative to rest ({meta.get('relative_detected') or 'relative=true'}; "
+                   f"{meta['relative_to_rest']}; relative=false to change)")
+    return out
+
+
 def run_metadata(src: Source, prepared: PreparedSource, baseline: Baseline | None, config_yaml: str,
                  overrides, n_sources: int) -> tuple[dict, dict]:
     """The root attribute ``import`` and the provenance of one imported file.
@@ -289,8 +393,9 @@ def run_metadata(src: Source, prepared: PreparedSource, baseline: Baseline | Non
                     "sha256": summ["sha256"], "source_bytes": summ["bytes"], "source_files": summ["files"],
                     "importer": importer,
                     "reader": meta, "fingers": prepared.decision, "frames": prepared.scan.frames,
-                    "rate_hz": None, "channels": list(prepared.scan.channels), "files_in_import": n_sources}
-    identity = {"biotac": {"model": "SynTouch BioTac SP (imported)", "serial_or_address": src.path.name,
+                    "rate_hz": None, "channels": list(prepared.scan.channels), "files_in_import": n_sources,
+                    "sensor": {**prepared.sensor.summary(), "how": prepared.sensor_how}}
+    identity = {"biotac": {"model": f"{prepared.sensor.name} (imported)", "serial_or_address": src.path.name,
                            "firmware": "unknown"}}
     prov = collect(config_yaml, list(overrides), identity,
                    baseline.calibration_attrs(fingers) if baseline else {}, None, protocol="import")

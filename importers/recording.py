@@ -19,7 +19,7 @@ from typing import Callable, Iterable, Iterator, Protocol
 
 import numpy as np
 
-from tactile_flow.hardware.biotac import FINGERS, N_TAXELS
+from tactile_flow.hardware.biotac import FINGERS
 from tactile_flow.hardware.errors import RATE_RANGE_HZ, brief
 from tactile_flow.runstore.clockmodel import ClockFit
 
@@ -49,7 +49,7 @@ class Recording:
         device_time: (N,) s, the sensor bridge's timestamp of each frame (header stamp,
             or the file's time column, or ``index / rate``).
         host_time: (N,) s, host receipt time (bag record time) or ``None`` if the file has none.
-        electrodes: (N, F, 24) int counts, taxels 1..24.
+        electrodes: (N, F, E) int counts, electrodes 1..E (24 on a BioTac SP, 19 on a classic BioTac).
         pdc, tdc, tac: (N, F) int counts or ``None`` when the file does not hold the channel.
         pac: list of N arrays (F, n_k) of 2.2 kHz PAC counts per frame, or ``None``.
         meta: what the reader found (format, topic, message type, columns, notes...), JSON-ready.
@@ -127,14 +127,17 @@ class Scan:
 @dataclass
 class PreparedSource:
     """One file ready for the second pass: its reader, what the first pass found, the
-    fingers to store (Shadow order), the finger decision (:func:`decide_fingers`) and the
-    frames per chunk."""
+    fingers to store (Shadow order), the finger decision (:func:`decide_fingers`), the
+    frames per chunk, and its sensor model (:class:`tactile.sensor.SensorModel`) with how it
+    was chosen."""
 
     reader: Reader
     scan: Scan
     fingers: tuple[str, ...]
     decision: dict
     chunk_frames: int = CHUNK_FRAMES
+    sensor: object = None
+    sensor_how: str = ""
 
     def chunks(self) -> Iterator[Recording]:
         """The file again, chunk by chunk, restricted to :attr:`fingers`."""
@@ -208,7 +211,7 @@ def head_of(rec: Recording, n: int) -> Recording:
 class Connectivity:
     """The unconnected-port rule (:func:`unconnected_fingers`) applied chunk by chunk.
 
-    Per finger (F,) booleans, true while *every* frame so far had all 24 electrodes at 0
+    Per finger (F,) booleans, true while *every* frame so far had all its electrodes at 0
     (``zero``), pdc = :data:`UNCONNECTED_PDC` (``bad_pdc``), or either (``either``).
     """
 
@@ -254,7 +257,7 @@ def unconnected_fingers(rec: Recording) -> dict[str, str]:
     """Fingers whose port has no sensor, with the reason, by name.
 
     A finger is unconnected when in *every* frame its PDC reads :data:`UNCONNECTED_PDC`
-    (−22072, what the Shadow driver reports for an empty port) or all 24 electrodes read 0
+    (−22072, what the Shadow driver reports for an empty port) or all its electrodes read 0
     (no real sensor reads 0 on every electrode: rest counts are ~2000–3500). A finger that
     drops out for part of the record is kept (those frames are invalid, not the finger).
     """
@@ -308,7 +311,7 @@ def decide_fingers(fingers, unconnected: dict, requested=None, src: str = "sourc
         raise ImportInputError(f"{src}: no connected finger in the recording ({dropped})")
     return {"kept": kept, "dropped": dropped,
             "rule": f"a finger is dropped (not stored) when every frame reads pdc = {UNCONNECTED_PDC} "
-                    f"or all {N_TAXELS} electrodes 0 (an empty port)"}
+                    f"or all its electrodes 0 (an empty port)"}
 
 
 def select_fingers(rec: Recording, requested=None) -> tuple[Recording, dict]:

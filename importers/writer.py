@@ -76,11 +76,12 @@ def _in_range(a: np.ndarray, axes) -> np.ndarray:
     return np.all((a >= 0) & (a <= COUNTS_MAX), axis=axes)
 
 
-def biotac_block(rec: Recording, to_run, host_t0: float) -> dict:
+def biotac_block(rec: Recording, to_run, host_t0: float, sensor=None) -> dict:
     """``biotac`` columns of a chunk (N frames, F fingers): ``time`` (s since run start),
     ``device_time`` (s), ``host_time`` (s since run start; NaN without host times), ``seq``,
     ``valid`` (every channel, PAC included, in 0..4095, as ``BiotacFrame.is_valid``), int16
-    ``electrodes`` (N, F, 24) and ``pdc``, ``tdc``, ``tac`` (N, F; zeros when absent)."""
+    ``electrodes`` (N, F, E) and ``pdc``, ``tdc``, ``tac`` (N, F; zeros when absent) under the
+    names the sensor model (``sensor``, default the BioTac SP) gives them, those it has."""
     n, F = rec.n_frames, len(rec.fingers)
     zeros = np.zeros((n, F), np.int64)
     chan = {c: getattr(rec, c) if getattr(rec, c) is not None else zeros for c in OPTIONAL}
@@ -91,13 +92,23 @@ def biotac_block(rec: Recording, to_run, host_t0: float) -> dict:
         valid &= np.array([bool(np.all((p >= 0) & (p <= COUNTS_MAX))) for p in rec.pac], bool)
     device = np.asarray(rec.device_time, float)
     host = np.full(n, np.nan) if rec.host_time is None else np.asarray(rec.host_time, float)
+    names = stored_names(sensor)
     return {"time": to_run(device), "device_time": device, "host_time": host - host_t0,
             "seq": np.asarray(rec.seq, np.int64), "valid": valid, "electrodes": _i16(rec.electrodes),
-            "pdc": _i16(chan["pdc"]), "tdc": _i16(chan["tdc"]), "tac": _i16(chan["tac"])}
+            **{names[c]: _i16(chan[c]) for c in OPTIONAL if c in names}}
+
+
+def stored_names(sensor=None) -> dict:
+    """``{pdc|tdc|tac|pac: stored name}`` of the channels the sensor model has (default the BioTac SP's)."""
+    if sensor is None:
+        from tactile_flow.tactile.sensor import builtin_sensor
+        sensor = builtin_sensor()
+    roles = {"pdc": "pressure", "tdc": "temperature", "tac": "temperature_change", "pac": "vibration"}
+    return {c: ch.name for c, role in roles.items() if (ch := sensor.channel(role)) is not None}
 
 
 def pac_block(rec: Recording, to_run, host_t0: float, rate_hz: float = PAC_RATE_HZ,
-              previous: float | None = None) -> dict:
+              previous: float | None = None, name: str = "pac") -> dict:
     """``biotac_pac`` columns of a chunk with PAC: (M, F) int16 ``pac`` and (M,) ``time_pac``,
     ``device_time``, ``host_time`` (s). A frame's n samples end at its timestamp, 1/rate apart
     (closer when the frame follows the one before sooner than that), strictly increasing, as
@@ -108,7 +119,7 @@ def pac_block(rec: Recording, to_run, host_t0: float, rate_hz: float = PAC_RATE_
     host = (np.repeat(np.asarray(rec.host_time, float), counts) if rec.host_time is not None
             else np.full(len(device), np.nan))
     return {"time_pac": to_run(device) if len(device) else np.zeros(0), "device_time": device,
-            "host_time": host - host_t0, "pac": _i16(pac)}
+            "host_time": host - host_t0, name: _i16(pac)}
 
 
 def gap_events(seq: np.ndarray, time: np.ndarray, last_seq: int | None, last_time: float | None) -> list[tuple]:
@@ -161,7 +172,8 @@ def write_import_store(prepared: PreparedSource, store_path: Path, provenance: d
              "calibration": baseline.calibration_attrs(fingers) if baseline else {},
              "streams_recorded": ["biotac"], "t0_clock_s": scan.t0,
              "recording_start_time": _iso(scan.t0) if has_host else None}
-    store = RunStore.create(store_path, protocol=PROTOCOL, fingers=fingers, provenance=provenance, attrs=attrs)
+    store = RunStore.create(store_path, protocol=PROTOCOL, fingers=fingers, provenance=provenance, attrs=attrs,
+                            sensor=prepared.sensor)
     try:
         counters = _append_chunks(store, prepared, to_run, host_t0,
                                   {"source": import_attrs.get("source"), "fingers": import_attrs.get("fingers")})
@@ -186,7 +198,8 @@ def write_import_store(prepared: PreparedSource, store_path: Path, provenance: d
     finally:
         if not store.closed:
             store.close(RunStatus.FAILED)
-    absent = [c for c in OPTIONAL if c not in scan.channels]
+    names = stored_names(prepared.sensor)
+    absent = [names[c] for c in OPTIONAL if c in names and c not in scan.channels]
     _finish_biotac_group(store_path, absent, baseline.counts(fingers) if baseline else None, baseline_attrs)
     return {**stream, "t0": scan.t0, "rate_hz": rate}
 
@@ -200,11 +213,14 @@ def _append_chunks(store: RunStore, prepared: PreparedSource, to_run, host_t0: f
     last_seq = last_time = last_pac = None
     sample_d, sample_h = [], []
     store.append("events", event_columns([(0.0, "info", "import", import_detail)]))
+    sensor = prepared.sensor
+    vib = sensor.vibration if sensor is not None else None
     for chunk in prepared.chunks():
-        bio = biotac_block(chunk, to_run, host_t0)
+        bio = biotac_block(chunk, to_run, host_t0, sensor)
         blocks = {"biotac": bio}
-        if chunk.pac is not None:
-            blocks["biotac_pac"] = pac_block(chunk, to_run, host_t0, previous=last_pac)
+        if chunk.pac is not None and (sensor is None or vib is not None):
+            blocks["biotac_pac"] = pac_block(chunk, to_run, host_t0, vib.rate_hz if vib else PAC_RATE_HZ,
+                                             previous=last_pac, name=vib.name if vib else "pac")
             if len(blocks["biotac_pac"]["device_time"]):
                 last_pac = float(blocks["biotac_pac"]["device_time"][-1])
         events = gap_events(bio["seq"], bio["time"], last_seq, last_time)
@@ -225,7 +241,7 @@ def _append_chunks(store: RunStore, prepared: PreparedSource, to_run, host_t0: f
 
 
 def _finish_biotac_group(store_path: Path, absent: list[str], baseline: np.ndarray | None, attrs: dict) -> None:
-    """Remove the channels the source does not hold and add ``biotac/baseline`` (F, 24) counts,
+    """Remove the channels the source does not hold and add ``biotac/baseline`` (F, E) counts,
     then re-consolidate (the store is not yet visible to anyone: it is still in staging)."""
     if not absent and baseline is None:
         return

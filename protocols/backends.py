@@ -42,9 +42,9 @@ def hardware_config(node):
 
 def make_lab(settings):
     """The unconnected lab for ``settings.hardware`` (a typed hardware config) and
-    ``settings.surface``."""
+    ``settings.surface``, its tactile sensors of model ``settings.sensor``."""
     hardware = settings.hardware
-    return _function(BACKENDS[backend_of(hardware)][1])(hardware, settings.surface)
+    return _function(BACKENDS[backend_of(hardware)][1])(hardware, settings.surface, sensor=settings.sensor)
 
 
 def board_warning(settings) -> str | None:

@@ -56,7 +56,7 @@ class RunContext(Geometry):
 
     def __init__(self, lab, recorder, settings: RunSettings, progress=None, live=None,
                  interrupts: Interrupts | None = None):
-        super().__init__(settings.hardware, lab.surface, settings.protocol.finger)
+        super().__init__(settings.hardware, lab.surface, settings.protocol.finger, lab.biotac.sensor_model)
         self.live = live                          # a protocols.live.LiveMonitor, or None
         self.hand_targets: dict[str, float] = {}  # joint angles commanded so far (rad)
         self.hand_until = -np.inf                 # clock time the commanded hand motion ends

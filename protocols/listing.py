@@ -1,4 +1,4 @@
-"""``tactile-run --list``: the protocols, surfaces, hardware and experiments this project
+"""``tactile-run --list``: the protocols, surfaces, hardware, sensors and experiments this project
 ships (``conf/``) and those of the command line's ``hydra.searchpath`` folders, one line each:
 the first sentence of each file's header comment, a search path's files marked with where
 they are. Hydra looks in ``conf/`` first, so a search-path file named as a packaged one is
@@ -17,6 +17,7 @@ from tactile_flow.cliapp.quick_help import searchpath_folder
 GROUPS = (("protocol", "protocols", "tactile-run protocol=NAME"),
           ("surface", "surfaces", "tactile-run surface=NAME (a protocol chooses its own)"),
           ("hardware", "hardware", "tactile-run hardware=NAME"),
+          ("sensor", "sensors", "tactile-run sensor=NAME; docs/sensors.md"),
           ("experiment", "experiments (sweeps)", "tactile-run -m +experiment=NAME"))
 WIDTH = 110
 
@@ -31,7 +32,7 @@ def summary(path: Path) -> str:
         if text and not text.startswith("@package"):
             lines.append(text)
     text = " ".join(lines)
-    text = re.sub(r"^(hardware=\w+|tactile-run [^:]*?)\s*:\s*", "", text)   # the file names itself
+    text = re.sub(r"^(hardware=\w+|sensor=\w+|tactile-run [^:]*?)\s*:\s*", "", text)   # the file names itself
     text = re.sub(r"\s*\((schema|see) [^)]*\)", "", text)                   # pointers for developers
     sentence = re.split(r"(?<=[.!?])\s", text, maxsplit=1)[0] if text else "(no description)"
     return sentence if len(sentence) <= WIDTH else sentence[:WIDTH - 3].rstrip() + "..."

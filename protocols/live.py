@@ -100,9 +100,10 @@ def warm_up(model: TactileModel, views) -> None:
     """Run the online pipeline on a few made-up frames, so that its compiled kernels are
     loaded before the run starts, not while the first frames queue up. (On a machine's first
     run :func:`tactile.warmup.compile_cold` has compiled them on every core just before.)"""
-    flow = online.OnlineFlow(model, np.full((1, 24), 10.0), ("ff",), views)
+    n = model.n_taxels
+    flow = online.OnlineFlow(model, np.full((1, n), 10.0), ("ff",), views)
     for i in range(3):
-        flow.push(i, 0.01 * i, np.full((1, 24), 3000 - 100 * i))
+        flow.push(i, 0.01 * i, np.full((1, n), 3000 - 100 * i))
 
 
 def tactile_config(offline: TactileConfig | None, views) -> TactileConfig:
@@ -144,7 +145,8 @@ class LiveMonitor:
         self.tap = biotac.tap(maxlen=int(10 * biotac.rate_hz))        # 10 s: a stalled engine drops, never grows
         self.detector = SlipDetector(len(self.fingers), cfg.slip)
         self.flow: online.OnlineFlow | None = None
-        self._rest_sum = np.zeros((len(self.fingers), 24))
+        self._rest_sum = np.zeros((len(self.fingers), model.n_taxels))
+        self._impedance = model.sensor.impedance if model.sensor is not None else signals.counts_to_impedance
         self._rest_n = 0
         self._next_display = -math.inf
         self.frames = 0
@@ -191,7 +193,7 @@ class LiveMonitor:
         if self.flow is None:                          # tare: accumulate the rest impedance
             for fr in frames:
                 if fr.is_valid():
-                    self._rest_sum += signals.counts_to_impedance(fr.electrodes[self.rows])
+                    self._rest_sum += self._impedance(fr.electrodes[self.rows])
                     self._rest_n += 1
             return None
         if frames:
@@ -278,7 +280,7 @@ def replay(model: TactileModel, rest_impedance, seq, t, electrodes, fingers, sli
     run would have (to measure false alarms on recordings, or tune thresholds).
 
     Args:
-        rest_impedance: (F, 24) kΩ. seq: (T,) frame numbers. t: (T,) s. electrodes: (T, F, 24)
+        rest_impedance: (F, N) kΩ. seq: (T,) frame numbers. t: (T,) s. electrodes: (T, F, N)
         counts. fingers: the F names. still: (T,) bool, the robot still (default: always).
     Returns ``detections`` [(t, finger, cause)] of every frame that fired, ``first`` (or
     None), ``frames``, and the online pipeline's per-finger ``counters``.

@@ -18,7 +18,6 @@ from tactile_flow.hardware.arm import trapezoid_time
 from tactile_flow.hardware.errors import brief
 from tactile_flow.hardware.transforms import rotvec_to_matrix
 from tactile_flow.hardware.surfaces import Surface, load_surface
-from tactile_flow.tactile.geometry import cached_fit_ellipsoid, load_taxels
 
 from .settings import run_settings
 from .steps import Criterion, ProtocolError, Repeat, Step
@@ -56,11 +55,13 @@ class Geometry:
     """Where the TCP must be for the protocol's finger to touch a given place.
 
     ``hw.fingertips[finger]`` is the sensor's pose in the TCP frame (m, rad); the pad's
-    lowest point in the sensor frame is the pole of the BioTac ellipsoid fitted to the
-    taxels (:mod:`tactile.geometry`). The TCP keeps the orientation of the home pose.
+    lowest point in the sensor frame is the pole of the sensor model's surface (the
+    ellipsoid of a BioTac, the centre of a flat pad: :attr:`tactile.sensor.SurfaceShape.pole`;
+    ``sensor``, a :class:`tactile.sensor.SensorModel`, default the BioTac SP). The TCP keeps
+    the orientation of the home pose.
     """
 
-    def __init__(self, hw, surface: Surface | None, finger: str):
+    def __init__(self, hw, surface: Surface | None, finger: str, sensor=None):
         if finger not in hw.fingertips:
             raise ProtocolError("protocol.finger", f"expected one of {sorted(hw.fingertips)}, got {finger!r}")
         self.surface = surface
@@ -69,8 +70,11 @@ class Geometry:
         self.stage_cfg = hw.stage                 # the object stage's settings; None: the lab has none
         tip = np.asarray(hw.fingertips[finger], float)
         self.R_tip = rotvec_to_matrix(tip[3:])
-        fit = cached_fit_ellipsoid(load_taxels())
-        pole_sensor = (fit.centre + np.array([0.0, 0.0, -fit.axes[2]])) * 1e-3
+        if sensor is None:
+            from tactile_flow.tactile.sensor import builtin_sensor
+            sensor = builtin_sensor()
+        self.sensor = sensor
+        pole_sensor = sensor.shape.pole * 1e-3
         self.pad_offset = self.R_tip @ pole_sensor + tip[:3]                     # TCP frame, m
 
     def tcp_for_pad(self, pad_world) -> np.ndarray:
@@ -154,8 +158,9 @@ class PlannedStep:
 class PlanContext(Geometry):
     """The planner's running state: planned pose, time and hand targets, parameters, limits."""
 
-    def __init__(self, hw, surface, params, limits: Limits, max_duration: float = DEFAULT_MAX_DURATION_S):
-        super().__init__(hw, surface, params.finger)
+    def __init__(self, hw, surface, params, limits: Limits, max_duration: float = DEFAULT_MAX_DURATION_S,
+                 sensor=None):
+        super().__init__(hw, surface, params.finger, sensor)
         self.params, self.limits, self.max_duration = params, limits, max_duration
         self.pose = self.home.copy()
         self.time = 0.0
@@ -243,12 +248,15 @@ def _point(p) -> str:
 @dataclass
 class Plan:
     """The checked timeline. ``setup``: how many leading steps run before the recording starts
-    (``protocol.tare: false``: the steps up to the first ``press`` make the contact unrecorded)."""
+    (``protocol.tare: false``: the steps up to the first ``press`` make the contact unrecorded).
+    ``sensor``: the fingertips' :class:`tactile.sensor.SensorModel` it was planned for (read
+    once from the config; the run hands it to the lab, the store and the live monitor)."""
 
     protocol: str
     steps: list[PlannedStep]
     labels: list[str]
     setup: int = 0
+    sensor: object = field(default=None, repr=False)
 
     @property
     def duration(self) -> float:
@@ -264,7 +272,8 @@ class Plan:
 
 def make_plan(cfg) -> Plan:
     """Check the protocol's steps against the hardware and the surface, and its expected
-    duration against ``safety.max_duration_s``; ``cfg``: :class:`~protocols.settings.RunSettings`
+    duration against ``safety.max_duration_s``, for the fingertips of ``settings.sensor`` (a
+    :class:`tactile.sensor.SensorModel`); ``cfg``: :class:`~protocols.settings.RunSettings`
     (or the composed config, checked first by :func:`~protocols.settings.run_settings`).
 
     Raises :class:`ProtocolError` (or the hardware's ``ConfigError``) naming the key at
@@ -274,7 +283,7 @@ def make_plan(cfg) -> Plan:
     params, hardware = settings.protocol, settings.hardware
     surface = load_surface(settings.surface) if settings.surface is not None else None
     max_duration = settings.safety.max_duration_s
-    ctx = PlanContext(hardware, surface, params, Limits.from_hardware(hardware), max_duration)
+    ctx = PlanContext(hardware, surface, params, Limits.from_hardware(hardware), max_duration, settings.sensor)
     ctx.check_parameters()
     if params.finger not in hardware.fingers:
         raise ProtocolError("protocol.finger", f"{params.finger!r} has no sensor in hardware.fingers "
@@ -299,7 +308,8 @@ def make_plan(cfg) -> Plan:
             planned.append(PlannedStep(len(planned), s, start, duration, waypoints))
 
     walk(params.steps)
-    return Plan(protocol=params.name, steps=planned, labels=list(params.labels), setup=_setup_steps(params, planned))
+    return Plan(protocol=params.name, steps=planned, labels=list(params.labels), setup=_setup_steps(params, planned),
+                sensor=settings.sensor)
 
 
 def _setup_steps(params, planned: list[PlannedStep]) -> int:

@@ -11,14 +11,13 @@ import json
 import os
 import sys
 from contextlib import nullcontext
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib.metadata import entry_points
 from pathlib import Path
 
 
 from tactile_flow.cliapp.heap import long_lived_frozen
 from tactile_flow.cliapp.progress import progress_bar
-from tactile_flow.tactile.geometry import load_taxels
 from tactile_flow.runstore import RunStore, provenance, rundir, utc_now
 from tactile_flow.runstore.catalogue import register_quietly
 from tactile_flow.runstore.checksum import store_checksum
@@ -88,7 +87,7 @@ def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrup
         # written whole (a signal raised on the way out would report a closed run as never started).
         interrupts.phase = "writing"
         prov.update(_reproducible(run_dir, cfg))
-        store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
+        store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers, sensor=cfg.sensor,
                                 run_id=prov["run_id"], provenance=provenance.summary(prov),
                                 attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
                                        "tare": cfg.protocol.tare},
@@ -216,7 +215,7 @@ def live_setup(cfg, plan: Plan, build: bool = True, console=print) -> tuple[Live
     that reacts to slip with the live monitor turned off is refused here, before anything
     moves. ``cfg``: :class:`~protocols.settings.RunSettings` (or the composed config)."""
     cfg = run_settings(cfg)
-    live = cfg.live
+    live = for_sensor_slip(cfg.live, cfg.sensor)
     reacting = plan.slip_steps()
     if not cfg.protocol.tare and (live.enabled or reacting):
         what = f"{reacting[0]} reacts to slip" if reacting else "live.enabled=true"
@@ -230,8 +229,8 @@ def live_setup(cfg, plan: Plan, build: bool = True, console=print) -> tuple[Live
     tactile = tactile_config(getattr(cfg.analysis, "tactile", None), live.views)
     if not build:
         return live, None
-    warmup.compile_cold(tactile, console=console, groups=warmup.LIVE)
-    model = TactileModel.build(tactile)
+    warmup.compile_cold(tactile, console=console, groups=warmup.LIVE, sensor=plan.sensor)
+    model = TactileModel.build(tactile, sensor=plan.sensor)
     warm_up(model, live.views)
     return live, model
 
@@ -260,7 +259,8 @@ def _conditions(cfg, lab, baseline: dict, plan: Plan) -> dict:
 
 def _calibration(lab) -> dict:
     baselines = getattr(lab.biotac, "calibration", {}) or {}
-    return {"taxels_mm": load_taxels().tolist(),
+    sensor = lab.biotac.sensor_model
+    return {"sensor": sensor.summary(), "taxels_mm": sensor.taxels.tolist(),
             "baseline_counts": {f: [float(x) for x in v] for f, v in baselines.items()}}
 
 
@@ -293,3 +293,15 @@ class ProgressConsole:
         if self.status is not None:
             self.status.close()
             self.status = None
+
+
+def for_sensor_slip(live: LiveConfig, sensor) -> LiveConfig:
+    """``live`` with the slip thresholds the sensor model asks for (its ``live_slip``) where the
+    run keeps the default (a threshold set to another value on the command line or in a
+    protocol is the run's)."""
+    from tactile_flow.tactile.slip import SlipConfig
+    if sensor is None or not sensor.live_slip:
+        return live
+    default = SlipConfig()
+    changes = {k: v for k, v in sensor.live_slip.items() if getattr(live.slip, k) == getattr(default, k)}
+    return replace(live, slip=replace(live.slip, **changes)) if changes else live

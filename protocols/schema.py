@@ -63,6 +63,7 @@ class RunConfig:
     protocol: ProtocolConfig = field(default_factory=ProtocolConfig)
     hardware: Any = MISSING
     surface: Any = None
+    sensor: Any = None                 # the fingertip sensor model (conf/sensor/; tactile.sensor.load_sensor checks it)
     analysis: Any = field(default_factory=dict)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     live: LiveConfig = field(default_factory=LiveConfig)

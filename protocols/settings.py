@@ -15,9 +15,11 @@ RunSettings; nothing reads the composed node again. What the pass checks, group 
   label cannot switch the analysis to another scheme;
 - ``hardware``: a tagged union on ``hardware.backend`` (:func:`protocols.backends.hardware_config`),
   and the calibration file it names;
+- ``sensor``: the fingertips' sensor model file (:func:`tactile.sensor.load_sensor`: taxels,
+  surface, views, channels), read once into a :class:`~tactile.sensor.SensorModel`;
 - ``surface``, ``safety`` (finite limits within their bounds, also with ``plan_only``),
-  ``live`` (its viewer, fingers and views), ``analysis`` (the analysis's own schema, through
-  the :data:`ANALYSIS_CHECK` entry point).
+  ``live`` (its viewer, fingers and views: the sensor's), ``analysis`` (the analysis's own
+  schema for this sensor, through the :data:`ANALYSIS_CHECK` entry point).
 
 What relates the groups to the steps — every waypoint against the workspace, every speed and
 force against the hardware's limits, every surface reference — is checked by the plan
@@ -58,6 +60,7 @@ class RunSettings:
         hardware: the backend's config: :class:`hardware.config.SimConfig` or
             :class:`hardware.lab.LabConfig`.
         surface: the board (None: none).
+        sensor: the fingertips' :class:`tactile.sensor.SensorModel`.
         safety, live: the interlocks' limits and the live monitor's settings.
         analysis: the analysis's typed config (``analysis.config.AnalysisConfig``), handed to
             the analysis after the run; None when no analysis is installed.
@@ -68,6 +71,7 @@ class RunSettings:
     protocol: ProtocolConfig
     hardware: Any
     surface: SurfaceConfig | None
+    sensor: Any
     safety: SafetyConfig
     live: LiveConfig
     analysis: Any = None
@@ -97,7 +101,9 @@ def run_settings(cfg) -> RunSettings:
     except Exception as exc:                     # an interpolation that cannot be resolved, a missing value
         key = getattr(exc, "full_key", None) or "config"
         raise ConfigError(str(key), f"{' '.join(str(getattr(exc, 'msg', exc)).split())}") from None
-    values = {name: check(plain.get(name), plain) for name, check in GROUPS.items()}
+    values: dict = {}
+    for name, check in GROUPS.items():               # in order: a later group's check may read an earlier one's
+        values[name] = check(plain.get(name), plain, values)
     options = {f.name: getattr(build(_Options, {k: plain[k] for k in _OPTION_KEYS if k in plain}, ""), f.name)
                for f in dataclasses.fields(_Options)}
     return RunSettings(**values, **options, config_yaml=OmegaConf.to_yaml(node, resolve=True))
@@ -116,7 +122,7 @@ _OPTION_KEYS = tuple(f.name for f in dataclasses.fields(_Options))
 
 
 # ----------------------------------------------------------------------------- the groups
-def _protocol(node, whole: dict) -> ProtocolConfig:
+def _protocol(node, whole: dict, typed: dict) -> ProtocolConfig:
     node = dict(node or {})
     steps = node.pop("steps", None)
     protocol = build(ProtocolConfig, node, "protocol")
@@ -132,7 +138,7 @@ def _check_labels(labels: list[str]) -> None:
         ep.load()(labels, "protocol.labels")
 
 
-def _hardware(node, whole: dict):
+def _hardware(node, whole: dict, typed: dict):
     if node is None:
         raise ConfigError("hardware", "missing; expected hardware=sim, lab or lab_emulated")
     hardware = hardware_config(node)
@@ -157,15 +163,20 @@ def _check_calibration(hardware) -> None:
                                f"'simulated' (hardware=sim) or null")
 
 
-def _surface(node, whole: dict) -> SurfaceConfig | None:
+def _surface(node, whole: dict, typed: dict) -> SurfaceConfig | None:
     return None if node is None else load_surface(node).cfg
 
 
-def _safety(node, whole: dict) -> SafetyConfig:
+def _sensor(node, whole: dict, typed: dict):
+    from tactile_flow.cliapp.sensors import composed_sensor
+    return composed_sensor({"sensor": node})
+
+
+def _safety(node, whole: dict, typed: dict) -> SafetyConfig:
     return build(SafetyConfig, node, "safety")
 
 
-def _live(node, whole: dict) -> LiveConfig:
+def _live(node, whole: dict, typed: dict) -> LiveConfig:
     try:
         live = build(LiveConfig, node, "live")
     except ConfigError:
@@ -182,20 +193,23 @@ def _live(node, whole: dict) -> LiveConfig:
     unknown = [f for f in live.fingers or () if f not in hardware_fingers]
     if unknown:
         raise ConfigError("live.fingers", f"{unknown} have no sensor in hardware.fingers {list(hardware_fingers)}")
+    sensor = typed["sensor"]
+    known = sensor.views if sensor is not None else tuple(DEFAULT_VIEWS)
     if not live.views:
-        raise ConfigError("live.views", "got none; expected one or more of " + ", ".join(sorted(DEFAULT_VIEWS)))
+        raise ConfigError("live.views", "got none; expected one or more of " + ", ".join(sorted(known)))
     for i, view in enumerate(live.views):
-        if view not in DEFAULT_VIEWS:
-            raise ConfigError(f"live.views[{i}]", unknown_key("live.views", view, DEFAULT_VIEWS, what="view").message)
+        if view not in known:
+            raise ConfigError(f"live.views[{i}]", unknown_key("live.views", view, known, what=(
+                f"view of sensor {sensor.name}" if sensor is not None else "view")).message)
     return live
 
 
-def _analysis(node, whole: dict):
+def _analysis(node, whole: dict, typed: dict):
     found = list(entry_points(group=ANALYSIS_CHECK))
-    return found[0].load()(node or {}) if found else None
+    return found[0].load()(node or {}, sensor=typed["sensor"]) if found else None
 
 
-#: every group of the run config and its check: ``check(node, whole) -> typed``, ``whole`` the
-#: plain composed config (for checks that read another group)
-GROUPS = {"protocol": _protocol, "hardware": _hardware, "surface": _surface, "safety": _safety,
+#: every group of the run config and its check, in order: ``check(node, whole, typed) -> typed``,
+#: ``whole`` the plain composed config, ``typed`` the groups checked before it
+GROUPS = {"protocol": _protocol, "hardware": _hardware, "surface": _surface, "sensor": _sensor, "safety": _safety,
           "live": _live, "analysis": _analysis}

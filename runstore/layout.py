@@ -44,10 +44,11 @@ class Block:
     vars: tuple[Column, ...]
 
 
-def lab_streams(fingers=FINGERS, stage: bool = False) -> dict[str, Stream]:
-    """The streams of a lab run, by name: what the sample types of the BioTacs, the arm, the
-    hand, the pump, the scale and (``stage``) the object stage declare."""
-    types = [BiotacFrame.describe(tuple(fingers)), ArmState.describe(), HandState.describe(),
+def lab_streams(fingers=FINGERS, stage: bool = False, sensor=None) -> dict[str, Stream]:
+    """The streams of a lab run, by name: what the sample types of the BioTacs (of model
+    ``sensor``, default the BioTac SP), the arm, the hand, the pump, the scale and (``stage``)
+    the object stage declare."""
+    types = [BiotacFrame.describe(tuple(fingers), sensor), ArmState.describe(), HandState.describe(),
              PumpState.describe(), ScaleReading.describe(), *([StageState.describe()] if stage else [])]
     return {s.name: s for declared in types for s in declared}
 
@@ -99,7 +100,7 @@ def _live_block(chunk: int) -> Block:
         Var("processed_time", T, "f8", "s", "when the frame's online flow and slip verdict were ready, since run start"),
         Var("seq", T, "i8", "1", "BioTac frame sequence number (joins biotac/seq)"),
         Var("processed", TF, "bool", "1", "the finger's sample was valid and processed (else skipped: NaN values)"),
-        Var("activation_total", TF, "f8", "kOhm", "sum of the 24 Kalman-filtered taxel activations (PDC proxy)"),
+        Var("activation_total", TF, "f8", "kOhm", "sum of the Kalman-filtered taxel activations (PDC proxy)"),
         *(Var(name, TFV, "f8", units, long) for name, units, long in per_view),
         Var("slip_fired", TF, "bool", "1", "the slip detector fired for the finger in this frame"),
         Var("slip_cause", TF, "i1", "1", "what fired: 0 none, 1 release, 2 creep, 3 rotation (tactile.slip.CAUSES)"),

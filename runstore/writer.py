@@ -86,7 +86,7 @@ class RunStore:
     def create(cls, path, *, protocol: str, fingers=FINGERS, run_id: str | None = None,
                provenance: dict | None = None, attrs: dict | None = None,
                chunk_s: float = 5.0, live: tuple | None = None, stage: bool = False,
-               streams: dict | None = None, room_bytes: int = 0) -> "RunStore":
+               streams: dict | None = None, room_bytes: int = 0, sensor=None) -> "RunStore":
         """Create ``path`` (must not exist) with every group, coordinate and empty variable,
         root attributes (``run_id``, ``protocol``, ``status="running"``, ``start_time``,
         ``schema_version``, ``provenance``) and commit it. ``live``: ``(fingers, views)``
@@ -94,6 +94,10 @@ class RunStore:
         streams it records (name → :class:`hardware.streams.Stream`, as the sample types'
         ``describe()`` declare them); by default the lab's
         (:func:`~runstore.layout.lab_streams` of ``fingers``, with ``stage`` the object stage's).
+        ``sensor``: the :class:`tactile.sensor.SensorModel` of the tactile sensors, recorded in
+        the root attributes ``sensor`` (name, taxels, checksum, file) and ``sensor_model`` (the
+        whole model), so that an analysis reads the geometry the run used
+        (:func:`runstore.sensor_of`); the BioTac SP's by default when ``streams`` is not given.
 
         Atomic: everything is made in a hidden directory beside ``path`` and renamed into
         place, so an interrupted creation leaves no half-made store (at most the hidden
@@ -106,13 +110,17 @@ class RunStore:
         if path.exists():
             raise FileExistsError(f"run store {path} already exists")
         fingers = tuple(fingers)
-        streams = lab_streams(fingers, stage) if streams is None else dict(streams)
+        if sensor is None and streams is None:
+            from tactile_flow.tactile.sensor import builtin_sensor
+            sensor = builtin_sensor()
+        streams = lab_streams(fingers, stage, sensor) if streams is None else dict(streams)
         schema = run_schema(chunk_s, live=bool(live), streams=streams)
         prov = provenance or {}
+        recorded = {} if sensor is None else {"sensor": sensor.summary(), "sensor_model": sensor.spec}
         root_attrs = jsonable(dict(run_id=run_id or prov.get("run_id") or str(uuid.uuid4()), protocol=protocol,
                                    status=RunStatus.RUNNING, start_time=prov.get("start_time") or utc_now(), end_time=None,
                                    schema_version=SCHEMA_VERSION, fingers=list(fingers), provenance=prov,
-                                   **(attrs or {})))
+                                   **recorded, **(attrs or {})))
         room = None
         if room_bytes:
             try:

@@ -1,7 +1,8 @@
-"""Computational tactile flow for BioTac SP fingertips: pure computation on arrays.
+"""Computational tactile flow for BioTac fingertips and other taxel arrays: pure computation on arrays.
 
 Modules, in the order the method uses them:
 
+- :mod:`tactile.sensor`    a sensor described as data (taxels, surface, views, channels, limits)
 - :mod:`tactile.signals`   raw counts → impedance (kΩ) → activation; Kalman filter + RTS smoother
 - :mod:`tactile.geometry`  taxel positions, half-ellipsoid fit, geodesic distances (cached)
 - :mod:`tactile.surface`   surface mesh, kernel interpolation, the displaced *tactile surface*
@@ -17,3 +18,5 @@ This package imports nothing else of the project.
 
 FINGERS = ("ff", "mf", "rf", "lf", "th")
 N_TAXELS = 24
+"""Taxels of the default sensor model (the BioTac SP); code that handles a record reads the
+count from its :class:`tactile.sensor.SensorModel` instead."""

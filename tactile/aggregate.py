@@ -170,17 +170,18 @@ def centre_of_pressure(activation, taxels) -> tuple[np.ndarray, np.ndarray]:
     """Activation-weighted taxel position and total activation.
 
     Args:
-        activation: (..., 24) activation (kΩ, positive under pressure).
-        taxels: (24, 3) taxel positions, mm.
+        activation: (..., N) activation (kΩ, positive under pressure).
+        taxels: (N, 3) taxel positions, mm.
 
     Returns:
         ``(cop, total)``: (..., 3) centre of pressure in mm, weighted by the positive part of
         the activation (NaN where nothing is pressed), and (...,) total activation (kΩ).
     """
-    activation = finite_array("activation", activation, last=24)
     taxels = finite_array("taxels", taxels, ndim=2, last=3)
+    activation = finite_array("activation", activation, last=len(taxels))
     load = np.clip(activation, 0.0, None)
     weight = load.sum(axis=-1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         cop = np.where(weight > 0, (load @ taxels) / weight, np.nan)
     return cop, activation.sum(axis=-1)
+

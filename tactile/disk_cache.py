@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ._checks import finite_array
-from .ellipsoid import EllipsoidFit, _check_axes, _check_on_surface, fit_ellipsoid
+from .ellipsoid import EllipsoidFit, _check_axes, _check_on_surface, fit_ellipsoid, fit_ellipsoid_with_normals
 from .geodesic import ALGORITHM_VERSION, GEODESIC_METHODS, geodesic_distances
 
 __all__ = ["cached_fit_ellipsoid", "cached_geodesic_distances", "default_cache_dir", "geodesic_cache_file"]
@@ -123,15 +123,21 @@ def cached_geodesic_distances(axes, points_a, points_b, *, method: str = "accura
     return dist
 
 
-def cached_fit_ellipsoid(points, *, cache_dir=None) -> EllipsoidFit:
-    """:func:`fit_ellipsoid` of ``points`` (N, 3) mm, computed once and kept on disk like the
-    geodesic distances: an .npz named by a SHA-256 of the points, :data:`FIT_VERSION` and
-    SciPy's version, holding centre, semi-axes and rms (mm). A damaged file is reported with
-    a warning and the fit recomputed; an unwritable cache costs only the time."""
+def cached_fit_ellipsoid(points, *, normals=None, normal_weight: float = 3.0, cache_dir=None) -> EllipsoidFit:
+    """:func:`fit_ellipsoid` of ``points`` (N, 3) mm — or with ``normals`` (N, 3),
+    :func:`fit_ellipsoid_with_normals` — computed once and kept on disk like the geodesic
+    distances: an .npz named by a SHA-256 of the points (and normals, weight),
+    :data:`FIT_VERSION` and SciPy's version, holding centre, semi-axes and rms (mm). A damaged
+    file is reported with a warning and the fit recomputed; an unwritable cache costs only the time."""
     from importlib.metadata import version
     pts = finite_array("points", points, ndim=2, last=3)
     directory = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    path = directory / f"ellipsoid-{_cache_key(pts, tags=(FIT_VERSION, version('scipy')))}.npz"
+    if normals is None:
+        key = _cache_key(pts, tags=(FIT_VERSION, version('scipy')))
+    else:
+        nrm = finite_array("normals", normals, ndim=2, last=3)
+        key = _cache_key(pts, nrm, tags=(FIT_VERSION, version('scipy'), "normals", float(normal_weight)))
+    path = directory / f"ellipsoid-{key}.npz"
     if path.exists():
         try:
             v = _read_cache(path, (7,))
@@ -139,7 +145,7 @@ def cached_fit_ellipsoid(points, *, cache_dir=None) -> EllipsoidFit:
         except Exception as exc:  # any damage: report and refit
             warnings.warn(f"ellipsoid cache file {path} is unusable ({exc!r}); fitting again",
                           RuntimeWarning, stacklevel=2)
-    fit = fit_ellipsoid(pts)
+    fit = fit_ellipsoid(pts) if normals is None else fit_ellipsoid_with_normals(pts, nrm, normal_weight)
     try:
         _write_cache(path, np.r_[fit.centre, fit.axes, fit.rms])
     except OSError as exc:

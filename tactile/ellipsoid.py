@@ -33,7 +33,7 @@ import numpy as np
 from ._checks import finite_array
 
 __all__ = ["EllipsoidFit", "SURFACE_TOL", "ellipsoid_angles", "ellipsoid_normals", "ellipsoid_points", "fit_ellipsoid",
-           "project_to_ellipsoid", "taxel_angles"]
+           "fit_ellipsoid_with_normals", "project_to_ellipsoid", "taxel_angles"]
 
 #: Relative tolerance |sqrt(sum((p/axes)^2)) - 1| for a point to count as on the surface.
 SURFACE_TOL = 1e-6
@@ -242,6 +242,45 @@ def fit_ellipsoid(points) -> EllipsoidFit:
     dist, _ = _signed_distance_and_jacobian(result.x, pts)
     return EllipsoidFit(centre=result.x[:3], axes=result.x[3:],
                         rms=float(np.sqrt(np.mean(dist**2))))
+
+
+def fit_ellipsoid_with_normals(points, normals, weight: float = 3.0) -> EllipsoidFit:
+    """Axis-aligned ellipsoid through ``points`` (N>=6, 3) mm whose outward normals at them
+    match ``normals`` (N, 3), unit: least squares of the orthogonal distances (mm) and of
+    ``weight`` × the difference of the unit normals (per mm of distance).
+
+    For taxels that cover only a band of the surface (the classic BioTac's 19 electrodes lie
+    between z = −5.1 and −1.1 mm) the positions alone leave the height of the centre free —
+    the position-only fit puts it 6.7 mm *above* every electrode, with a rim far from any —
+    while the published normals (the side electrodes face almost sideways) pin the equator
+    down. ``rms`` is that of the distances alone. Started from the point nearest to every
+    normal's line (where the normals point away from).
+    """
+    from scipy.optimize import least_squares
+    pts = finite_array("points", points, ndim=2, last=3)
+    nrm = finite_array("normals", normals, ndim=2, last=3)
+    if len(pts) < 6 or len(nrm) != len(pts):
+        raise ValueError(f"points, normals: expected at least 6 points and one normal each, got {len(pts)} "
+                         f"and {len(nrm)}")
+    nrm = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+    w = float(weight)
+    proj = np.eye(3)[None] - nrm[:, :, None] * nrm[:, None, :]            # (N, 3, 3) across each normal
+    centre0 = np.linalg.lstsq(proj.sum(0), np.einsum("nij,nj->i", proj, pts), rcond=None)[0]
+    span = float(np.max(np.ptp(pts, axis=0)))
+    x0 = np.r_[centre0, np.maximum(np.ptp(pts, axis=0) / 2 + 1.0, 1e-3 * span)]
+
+    def residuals(p):
+        centre, ax = p[:3], p[3:]
+        q = pts - centre
+        foot = _project_np(ax, q)
+        g = foot / ax**2
+        n = g / np.linalg.norm(g, axis=1, keepdims=True)
+        return np.r_[np.sum((q - foot) * n, axis=1), w * (n - nrm).ravel()]
+
+    result = least_squares(residuals, x0, bounds=(np.r_[np.full(3, -np.inf), np.full(3, 1e-9 * span)], np.inf),
+                           x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=2000)
+    dist = residuals(result.x)[:len(pts)]
+    return EllipsoidFit(centre=result.x[:3], axes=result.x[3:], rms=float(np.sqrt(np.mean(dist**2))))
 
 
 def taxel_angles(fit: EllipsoidFit, points) -> tuple[np.ndarray, np.ndarray]:

@@ -1,7 +1,7 @@
 """Online tactile flow: the method one BioTac frame at a time, for several fingers.
 
 :class:`OnlineFlow` takes the stream as it arrives — one frame of raw electrode counts
-(F, 24) for all fingers every ~10 ms — and returns, for every finger and view, the
+(F, N) for all fingers every ~10 ms (N taxels of the sensor model) — and returns, for every finger and view, the
 aggregates of the tactile flow between that finger's previous frame and this one
 (:class:`OnlineStep`), in a bounded, preallocated state. Per finger and sample::
 
@@ -19,7 +19,7 @@ offline analysis keeps the smoother. Everything else is the same computation, so
 online results equal the offline pipeline run with the smoother off::
 
     model = TactileModel.build(replace(config, smooth=False))
-    act = model.smooth(signals.counts_to_activation(counts, baseline))      # (T, F, 24)
+    act = model.smooth(signals.counts_to_activation(counts, baseline))      # (T, F, N)
     process_view(model, act[:, f], view).dynamic                           # = online, finger f
 
 frame by frame: the 8-bit frames bit for bit, the aggregates to float rounding
@@ -67,7 +67,7 @@ import cv2
 import numba
 import numpy as np
 
-from . import N_TAXELS, _frame_kernels, aggregate, farneback, flow, frames, signals
+from . import _frame_kernels, aggregate, farneback, flow, frames, signals
 from ._checks import finite_array
 from .pipeline import TactileModel
 
@@ -96,7 +96,7 @@ class OnlineStep:
         magnitude: (F, V) |mean|, px/frame.  direction: (F, V) atan2(row, col), rad.
         divergence, curl: (F, V) mean over the footprint interior, 1/frame.
         confidence: (F, V) fraction of footprint pixels moving more than ``config.noise``.
-        activation_total: (F,) sum of the 24 filtered activations, kΩ: the PDC proxy
+        activation_total: (F,) sum of the N filtered activations, kΩ: the PDC proxy
             :func:`tactile.signals.pdc_proxy` of the filtered activation.
 
     Flow is from the finger's previous *processed* frame ("px/frame" = per processed
@@ -125,15 +125,16 @@ class OnlineStep:
 
 
 @numba.njit(cache=True, nogil=True)
-def _filter_step(counts, usable, baseline, r, q, x, p, n):  # pragma: no cover - compiled
+def _filter_step(counts, usable, baseline, r, q, x, p, n, counts_max, reference):  # pragma: no cover - compiled
     """One sample of every finger through counts → activation → Kalman filter, in place.
 
-    ``counts`` (F, 24) raw counts; ``usable`` (F,) bool: on entry the caller's validity
+    ``counts`` (F, N) raw counts; ``usable`` (F,) bool: on entry the caller's validity
     flags, on return whether each finger's row was used (flagged valid and every count
-    finite within 1..4095). ``baseline`` (F, 24) rest impedance, kΩ; ``r``, ``q``:
+    finite within 1..counts_max). ``baseline`` (F, N) rest impedance, kΩ; ``r``, ``q``:
     observation and process variances, kΩ². State, updated for used fingers only:
-    ``x`` (F, 24) filtered activation, kΩ; ``p`` (F,) its variance, kΩ²; ``n`` (F,) samples
-    filtered so far (0: the next one is the first).
+    ``x`` (F, N) filtered activation, kΩ; ``p`` (F,) its variance, kΩ²; ``n`` (F,) samples
+    filtered so far (0: the next one is the first). ``counts_max``, ``reference``: the
+    sensor's ADC full scale (counts) and reference resistor (kΩ).
 
     The arithmetic is that of :func:`tactile.signals.counts_to_impedance`,
     :func:`~tactile.signals.activation` and one step of the kernels behind
@@ -144,7 +145,7 @@ def _filter_step(counts, usable, baseline, r, q, x, p, n):  # pragma: no cover -
         ok = usable[f]
         for c in range(counts.shape[1]):
             e = counts[f, c]
-            if not (e >= 1.0 and e <= signals.COUNTS_MAX):      # NaN fails too
+            if not (e >= 1.0 and e <= counts_max):      # NaN fails too
                 ok = False
         usable[f] = ok
         if not ok:
@@ -154,7 +155,7 @@ def _filter_step(counts, usable, baseline, r, q, x, p, n):  # pragma: no cover -
         k = p_pred / (p_pred + r)
         p[f] = p_pred - k * p_pred
         for c in range(counts.shape[1]):
-            z = (signals.COUNTS_MAX / counts[f, c] - 1.0) * signals.REFERENCE_KOHM - baseline[f, c]
+            z = (counts_max / counts[f, c] - 1.0) * reference - baseline[f, c]
             prev = z if first else x[f, c]
             x[f, c] = prev + k * (z - prev)
         n[f] += 1
@@ -190,7 +191,7 @@ class OnlineFlow:
         model: the precomputed model (geometry, views, renderer, flow and noise settings
             from ``model.config``; ``config.smooth`` is ignored: online is filter-only, see
             the module docstring).
-        baseline_impedance: (F, 24) rest impedance per finger, kΩ, as
+        baseline_impedance: (F, N) rest impedance per finger, kΩ (N: the model's taxels), as
             :func:`tactile.signals.activation` takes it (from
             :func:`~tactile.signals.baseline_from_rest` or stored calibrations).
         fingers: the F finger names, in the order of the rows of every pushed frame.
@@ -216,10 +217,14 @@ class OnlineFlow:
             raise ValueError(f"views: expected distinct names from {sorted(model.plans)}, got {self.views}")
         n_f, n_v = len(self.fingers), len(self.views)
         baseline = finite_array("baseline_impedance", baseline_impedance, ndim=2)
-        if baseline.shape != (n_f, N_TAXELS):
-            raise ValueError(f"baseline_impedance: expected shape ({n_f}, {N_TAXELS}) (fingers × "
+        n_t = model.n_taxels
+        if baseline.shape != (n_f, n_t):
+            raise ValueError(f"baseline_impedance: expected shape ({n_f}, {n_t}) (fingers × "
                              f"taxels, kΩ), got {baseline.shape}")
         self.model = model
+        e = model.sensor.electrodes if model.sensor is not None else None
+        self._counts_max = float(signals.COUNTS_MAX if e is None else e.counts_max)
+        self._reference = float(signals.REFERENCE_KOHM if e is None else e.reference_kohm)
         c = model.config
         self._baseline = np.ascontiguousarray(baseline)
         self._r, self._q = float(c.kalman_r), float(c.kalman_q)
@@ -231,10 +236,10 @@ class OnlineFlow:
         low, gain = frames._u8_mapping(*c.intensity_range)
 
         # Per finger: the filter state and the counters.
-        self._counts = np.empty((n_f, N_TAXELS))
+        self._counts = np.empty((n_f, n_t))
         self._usable = np.empty(n_f, np.bool_)
-        self._x = np.zeros((n_f, N_TAXELS))
-        self._x32 = np.zeros((n_f, 1, N_TAXELS), np.float32)        # linear renderer's input
+        self._x = np.zeros((n_f, n_t))
+        self._x32 = np.zeros((n_f, 1, n_t), np.float32)             # linear renderer's input
         self._p = np.zeros(n_f)
         self._n = np.zeros(n_f, np.int64)
         self._finger_seq = [0] * n_f                                # seq of the last processed sample
@@ -247,7 +252,7 @@ class OnlineFlow:
         self._per_view = []
         for name in self.views:
             plan = model.plans[name]
-            render = (np.ascontiguousarray(model.weights[plan.vertices].T),          # (24, K)
+            render = (np.ascontiguousarray(model.weights[plan.vertices].T),          # (N, K)
                       *frames.frame_geometry(plan, model.mesh, c.scale))
             scratch = (np.empty(len(plan.vertices)), *frames.frame_scratch(plan))
             linear = (model.operators[name].T, np.empty((1, plan.mask.size), np.float32))
@@ -298,7 +303,7 @@ class OnlineFlow:
         Args:
             seq: the frame's sequence number (an integer; must increase from frame to frame).
             t: its time, s (device or host clock; must increase).
-            counts: (F, 24) raw 12-bit electrode counts, rows in the order of ``fingers``.
+            counts: (F, N) raw electrode counts, rows in the order of ``fingers``.
             valid: optional (F,) bool; False skips that finger for this frame.
 
         Raises ``ValueError`` only for arguments of the wrong shape or type; bad data
@@ -306,8 +311,8 @@ class OnlineFlow:
         """
         n_f = len(self.fingers)
         arr = np.asarray(counts)
-        if arr.shape != (n_f, N_TAXELS):
-            raise ValueError(f"counts: expected shape ({n_f}, {N_TAXELS}) (fingers {self.fingers} × "
+        if arr.shape != (n_f, self.model.n_taxels):
+            raise ValueError(f"counts: expected shape ({n_f}, {self.model.n_taxels}) (fingers {self.fingers} × "
                              f"taxels), got {arr.shape}")
         if valid is not None and np.shape(valid) != (n_f,):
             raise ValueError(f"valid: expected shape ({n_f},) (one flag per finger {self.fingers}), "
@@ -332,7 +337,8 @@ class OnlineFlow:
             self._usable[:] = True
         else:
             np.copyto(self._usable, valid, casting="unsafe")
-        _filter_step(self._counts, self._usable, self._baseline, self._r, self._q, self._x, self._p, self._n)
+        _filter_step(self._counts, self._usable, self._baseline, self._r, self._q, self._x, self._p, self._n,
+                     self._counts_max, self._reference)
         np.copyto(step.processed, self._usable)
         for f in range(n_f):
             if self._usable[f]:

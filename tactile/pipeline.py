@@ -11,7 +11,7 @@ kept (uint8, 1 kB per 32×32 frame), flow fields only on request.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -49,7 +49,7 @@ class TactileConfig:
             ignores how the displacement moves silhouettes (mean difference ≈ 0.05 kΩ per
             pixel at the defaults; measure with ``benchmarks/bench_pipeline.py``).
         views: names of the views to render (keys of ``custom_views`` or of
-            :data:`tactile.frames.DEFAULT_VIEWS`).
+            :data:`tactile.frames.DEFAULT_VIEWS`, or the sensor model's); empty: the sensor's.
         custom_views: extra views defined in config.
         size: frame size (H, W) [px].
         intensity_range: activation mapped to 0 and 255 [kΩ].
@@ -78,54 +78,83 @@ class TactileConfig:
 
 @dataclass(frozen=True)
 class TactileModel:
-    """Precomputed geometry for one configuration: build once with :meth:`build`."""
+    """Precomputed geometry for one configuration and one sensor model: build once with :meth:`build`.
+
+    ``taxels`` (N, 3) mm, sensor frame; ``fit`` the ellipsoid the taxels are carried over
+    (``None`` for a flat sensor); ``weights`` (M, N) Nadaraya–Watson weights; ``operators``:
+    view → (H·W, N) frame of the undisplaced surface; ``sensor``: the model it was built for
+    (``None``: taxel positions given as an array)."""
 
     config: TactileConfig
-    taxels: np.ndarray                       # (24, 3) mm, sensor frame
-    fit: geometry.EllipsoidFit
+    taxels: np.ndarray
+    fit: "geometry.EllipsoidFit | None"
     mesh: surface.SurfaceMesh
-    weights: np.ndarray                      # (M, 24) Nadaraya–Watson weights
+    weights: np.ndarray
     plans: dict[str, frames.FramePlan]
-    operators: dict[str, np.ndarray]         # view → (H·W, 24) frame of the undisplaced surface
+    operators: dict[str, np.ndarray]
+    sensor: object = None
+
+    @property
+    def n_taxels(self) -> int:
+        return len(self.taxels)
 
     @classmethod
-    def build(cls, config: TactileConfig = TactileConfig(), taxels=None, cache_dir=None) -> "TactileModel":
-        """Fit the ellipsoid, mesh it, compute (or load cached) geodesic kernel weights and plans."""
+    def build(cls, config: TactileConfig = TactileConfig(), taxels=None, cache_dir=None,
+              sensor=None) -> "TactileModel":
+        """Fit or take the sensor's surface, mesh it, compute (or load cached) geodesic kernel
+        weights and plans. ``sensor``: a :class:`tactile.sensor.SensorModel` (default the
+        BioTac SP's); ``taxels``: (N, 3) positions instead, carried over the ellipsoid fitted
+        to them. The views rendered are ``config.views``: each a view of the sensor
+        (``sensor.views``) or one of ``config.custom_views``."""
         if config.render not in ("exact", "linear"):
             raise ValueError(f"render: expected 'exact' or 'linear', got {config.render!r}")
-        taxels, fit, mesh = cls.surface_of(config, taxels, cache_dir)
+        taxels, fit, mesh = cls.surface_of(config, taxels, cache_dir, sensor)
+        if not config.views:
+            config = replace(config, views=tuple(sensor.views) if sensor is not None else tuple(frames.DEFAULT_VIEWS))
         weights = surface.interpolation_weights(mesh, taxels, sigma=config.sigma, kernel=config.kernel,
                                                 geodesic=config.geodesic, cache_dir=cache_dir)
-        known = {**frames.DEFAULT_VIEWS, **config.custom_views}
+        sensor_views = {} if sensor is None else {v: frames.DEFAULT_VIEWS.get(v) or frames.View(v, **sensor.custom_views[v])
+                                                  for v in sensor.views}
+        known = ({**frames.DEFAULT_VIEWS, **config.custom_views} if sensor is None
+                 else {**sensor_views, **config.custom_views})
         unknown = [v for v in config.views if v not in known]
         if unknown:
-            raise ValueError(f"views: unknown view(s) {unknown}; expected names from {sorted(known)}")
+            whose = "" if sensor is None else f" of sensor {sensor.name}"
+            raise ValueError(f"views: unknown view(s) {unknown}{whose}; expected names from {sorted(known)}")
         margin = max(config.scale * config.intensity_range[1], 0.0) + 0.5
         plans = {name: frames.make_frame_plan(mesh, known[name], size=config.size, margin=margin)
                  for name in config.views}
         operators = {name: (frames.linear_operator(plan, mesh) @ weights).astype(np.float32)
                      for name, plan in plans.items()}
         return cls(config=config, taxels=taxels, fit=fit, mesh=mesh, weights=weights, plans=plans,
-                   operators=operators)
+                   operators=operators, sensor=sensor)
 
     @staticmethod
-    def surface_of(config: TactileConfig = TactileConfig(), taxels=None, cache_dir=None) -> tuple:
-        """``(taxels, fit, mesh)`` of :meth:`build`: the (24, 3) taxels (default: the BioTac SP's),
-        the ellipsoid fitted to them (cached on disk) and its mesh."""
-        taxels = geometry.load_taxels() if taxels is None else finite_array("taxels", taxels, ndim=2, last=3)
-        if len(taxels) != 24:
-            raise ValueError(f"taxels: expected 24 taxel positions, got {len(taxels)}")
+    def surface_of(config: TactileConfig = TactileConfig(), taxels=None, cache_dir=None, sensor=None) -> tuple:
+        """``(taxels, fit, mesh)`` of :meth:`build`: the sensor's (N, 3) taxels (default: the
+        BioTac SP's), its ellipsoid (``None`` for a plane) and the mesh; or for ``taxels`` given,
+        the ellipsoid fitted to them (cached on disk)."""
+        if taxels is None:
+            from .sensor import builtin_sensor
+            shape = (sensor or builtin_sensor()).shape
+            taxels = np.array((sensor or builtin_sensor()).taxels)
+            fit = (geometry.EllipsoidFit(centre=shape.centre, axes=shape.extent, rms=shape.rms_mm)
+                   if shape.kind == "ellipsoid" else None)
+            return taxels, fit, surface.mesh_of(shape, config.mesh_spacing)
+        taxels = finite_array("taxels", taxels, ndim=2, last=3)
+        if len(taxels) < 6:
+            raise ValueError(f"taxels: expected at least 6 taxel positions to fit a surface to, got {len(taxels)}")
         fit = geometry.cached_fit_ellipsoid(taxels, cache_dir=cache_dir)
         return taxels, fit, surface.build_mesh(fit.centre, fit.axes, spacing=config.mesh_spacing)
 
     def smooth(self, activation) -> np.ndarray:
-        """Kalman (+ RTS if ``config.smooth``) along axis 0 of (T, ..., 24) activation, kΩ."""
+        """Kalman (+ RTS if ``config.smooth``) along axis 0 of (T, ..., N) activation, kΩ."""
         c = self.config
         run = signals.kalman_smooth if c.smooth else signals.kalman_filter
         return run(activation, R=c.kalman_r, Q=c.kalman_q)
 
     def render(self, activation, view: str) -> np.ndarray:
-        """Activation frames (T, H, W) float32 [kΩ] of one view for (T, 24) activation."""
+        """Activation frames (T, H, W) float32 [kΩ] of one view for (T, N) activation."""
         return self._render(activation, view, None)
 
     def render_uint8(self, activation, view: str, intensity_range=None) -> np.ndarray:
@@ -137,7 +166,7 @@ class TactileModel:
     def _render(self, activation, view, intensity_range):
         plan = self.plans[view]
         if self.config.render == "linear":
-            act = finite_array("activation", activation, ndim=2, last=24).astype(np.float32)
+            act = finite_array("activation", activation, ndim=2, last=self.n_taxels).astype(np.float32)
             if intensity_range is None:
                 return (act @ self.operators[view].T).reshape((len(act),) + plan.shape)
             return frames.linear_uint8(act, self.operators[view].T, plan.shape, *intensity_range)
@@ -203,7 +232,7 @@ def process_view(model: TactileModel, activation, view: str, reference: int | No
 
     Args:
         model: the precomputed model.
-        activation: (T, 24) smoothed activation of one finger, kΩ.
+        activation: (T, N) smoothed activation of one finger, kΩ (N taxels of the model).
         view: a name in ``model.plans``.
         reference: a frame index for one static flow (named ``"reference"``); kept for
             callers of one reference, same as ``references={"reference": i}``.
@@ -218,7 +247,7 @@ def process_view(model: TactileModel, activation, view: str, reference: int | No
             slowly) is computed on every ``static_every``-th frame, the last and each reference
             frame, and its aggregates interpolated linearly in between.
     """
-    activation = finite_array("activation", activation, ndim=2, last=24, min_len=1)
+    activation = finite_array("activation", activation, ndim=2, last=model.n_taxels, min_len=1)
     if view not in model.plans:
         raise ValueError(f"view: expected one of {sorted(model.plans)}, got {view!r}")
     c = model.config
@@ -282,9 +311,10 @@ def _static_aggregates(frames: np.ndarray, ref: np.ndarray, plan, c) -> aggregat
 
 
 def activation_from_counts(counts, baseline_impedance, model: TactileModel) -> np.ndarray:
-    """Raw electrode counts (T, ..., 24) → smoothed activation (T, ..., 24), kΩ.
+    """Raw electrode counts (T, ..., N) → smoothed activation (T, ..., N), kΩ.
 
-    ``baseline_impedance`` (..., 24) kΩ: from a rest stretch
+    ``baseline_impedance`` (..., N) kΩ: from a rest stretch
     (:func:`tactile.signals.baseline_from_rest`) or a stored calibration.
     """
-    return model.smooth(signals.activation(signals.counts_to_impedance(counts), baseline_impedance))
+    z = signals.counts_to_impedance(counts) if model.sensor is None else model.sensor.impedance(counts)
+    return model.smooth(signals.activation(z, baseline_impedance))

@@ -1,8 +1,9 @@
-"""BioTac SP electrode signals: raw counts → impedance (kΩ) → activation, and smoothing.
+"""BioTac electrode signals: raw counts → impedance (kΩ) → activation, and smoothing.
 
 Conversion
 ----------
-A BioTac SP reports each of its 24 electrodes ("taxels") as a raw 12-bit count
+A BioTac SP reports each of its 24 electrodes ("taxels"; the classic BioTac 19: the sensor
+model says how many, :mod:`tactile.sensor`) as a raw 12-bit count
 ``E`` in 0..4095 (about 100 Hz). The electrode sits in a voltage divider against a
 10 kΩ reference, so its impedance is (SynTouch BioTac SP manual)::
 
@@ -60,7 +61,6 @@ from typing import Any
 import numba
 import numpy as np
 
-from . import N_TAXELS
 from ._checks import finite_array
 
 __all__ = [
@@ -87,19 +87,19 @@ REFERENCE_KOHM = 10.0
 
 # --------------------------------------------------------------------------- validation
 
-def _counts_array(name: str, counts) -> np.ndarray:
-    """``counts`` as float64 after checking finite, within 0..4095 and non-zero."""
+def _counts_array(name: str, counts, counts_max: float = COUNTS_MAX) -> np.ndarray:
+    """``counts`` as float64 after checking finite, within 0..counts_max and non-zero."""
     arr = finite_array(name, counts)
-    outside = int(np.count_nonzero((arr < 0) | (arr > COUNTS_MAX)))
+    outside = int(np.count_nonzero((arr < 0) | (arr > counts_max)))
     if outside:
-        raise ValueError(f"{name}: expected raw 12-bit counts within 0..{COUNTS_MAX}, "
+        raise ValueError(f"{name}: expected raw counts within 0..{counts_max:g}, "
                          f"found {outside} value(s) out of range "
                          f"(min {arr.min():g}, max {arr.max():g})")
     zeros = int(np.count_nonzero(arr == 0))
     if zeros:
         raise ValueError(f"{name}: found {zeros} count(s) equal to 0, which would mean an "
                          f"infinite impedance (a shorted or disconnected channel); "
-                         f"expected counts within 1..{COUNTS_MAX}")
+                         f"expected counts within 1..{counts_max:g}")
     return arr
 
 
@@ -134,8 +134,9 @@ def _norm_axis(axis, ndim: int) -> int:
 
 # --------------------------------------------------------------------------- conversion
 
-def counts_to_impedance(counts) -> np.ndarray:
-    """Electrode impedance (kΩ) from raw BioTac SP counts: ``Z = (4095/E − 1) · 10 kΩ``.
+def counts_to_impedance(counts, counts_max: float = COUNTS_MAX, reference_kohm: float = REFERENCE_KOHM) -> np.ndarray:
+    """Electrode impedance (kΩ) from raw BioTac counts: ``Z = (4095/E − 1) · 10 kΩ``
+    (``counts_max`` and ``reference_kohm``: a sensor model's ``electrodes``; the BioTacs' by default).
 
     ``counts``: any shape, raw 12-bit counts; must be finite and within 1..4095
     (``ValueError`` naming ``counts`` otherwise — a count of 0 means a shorted or
@@ -143,8 +144,8 @@ def counts_to_impedance(counts) -> np.ndarray:
     are allowed. Returns a new float64 array of the same shape, in kΩ, ≥ 0; fewer counts
     give a higher impedance.
     """
-    e = _counts_array("counts", counts)
-    return (COUNTS_MAX / e - 1.0) * REFERENCE_KOHM
+    e = _counts_array("counts", counts, counts_max)
+    return (counts_max / e - 1.0) * reference_kohm
 
 
 def baseline_from_rest(counts, start: int = 0, stop: int | None = None,
@@ -217,8 +218,8 @@ def counts_to_activation(counts, baseline_impedance) -> np.ndarray:
 class SensorCalibration:
     """Stored rest state of one BioTac SP, to use when a record has no rest stretch.
 
-    ``baseline_counts``: (24,) float, mean raw counts per taxel at rest (each within
-    1..4095); ``sensor_id``: which physical sensor (e.g. its serial number), non-empty;
+    ``baseline_counts``: (N,) float, mean raw counts per taxel at rest (each within
+    1..4095; N the sensor model's taxels, checked against it by the caller); ``sensor_id``: which physical sensor (e.g. its serial number), non-empty;
     ``source``: free text saying where the numbers come from (session, date, stretch).
     The array is stored as a read-only copy. JSON-ready via :meth:`to_dict` /
     :meth:`from_dict`.
@@ -234,8 +235,8 @@ class SensorCalibration:
 
     def __post_init__(self):
         counts = _counts_array("baseline_counts", self.baseline_counts)
-        if counts.shape != (N_TAXELS,):
-            raise ValueError(f"baseline_counts: expected shape ({N_TAXELS},), "
+        if counts.ndim != 1 or not counts.size:
+            raise ValueError(f"baseline_counts: expected one count per taxel (a 1-D list), "
                              f"got shape {counts.shape}")
         if not isinstance(self.sensor_id, str) or not self.sensor_id:
             raise ValueError(f"sensor_id: expected a non-empty string, got {self.sensor_id!r}")
@@ -248,8 +249,8 @@ class SensorCalibration:
     @classmethod
     def from_rest(cls, counts, sensor_id: str, source: str = "", start: int = 0,
                   stop: int | None = None) -> "SensorCalibration":
-        """Calibration from the mean counts of a rest stretch ``[start:stop)`` of a (T, 24) record."""
-        arr = finite_array("counts", counts, ndim=2, last=N_TAXELS, min_len=1)
+        """Calibration from the mean counts of a rest stretch ``[start:stop)`` of a (T, N) record."""
+        arr = finite_array("counts", counts, ndim=2, min_len=1)
         stop_ = arr.shape[0] if stop is None else stop
         if not 0 <= start < stop_ <= arr.shape[0]:
             raise ValueError(f"start, stop: expected 0 <= start < stop <= {arr.shape[0]}, "
@@ -259,7 +260,7 @@ class SensorCalibration:
 
     @property
     def baseline_impedance(self) -> np.ndarray:
-        """(24,) rest impedance in kΩ."""
+        """(N,) rest impedance in kΩ."""
         return counts_to_impedance(self.baseline_counts)
 
     def to_dict(self) -> dict[str, Any]:

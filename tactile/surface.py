@@ -1,6 +1,7 @@
 """The sensor's surface mesh, kernel interpolation of taxel values, and the *tactile surface*.
 
-The fitted half-ellipsoid (see :mod:`tactile.ellipsoid`) is sampled on rings of constant θ
+A sensor model (:mod:`tactile.sensor`) names its surface: a half-ellipsoid (the BioTacs) or a
+flat rectangle (a taxel pad). The fitted half-ellipsoid (see :mod:`tactile.ellipsoid`) is sampled on rings of constant θ
 between the rim (θ = π/2, z = centre) and the pad's pole (θ = π). Each ring carries a
 number of vertices proportional to its circumference, so vertices are spaced about
 ``spacing`` mm apart everywhere, including near the pole where a plain (θ, φ) grid would
@@ -23,22 +24,25 @@ from ._checks import finite_array, positive
 from .ellipsoid import ellipsoid_normals, ellipsoid_points, project_to_ellipsoid
 from .disk_cache import cached_geodesic_distances, geodesic_cache_file
 
-__all__ = ["KERNEL_FORMS", "SurfaceMesh", "build_mesh", "interpolate", "interpolation_weights",
-           "kernel_weights", "tactile_surface", "weights_on_disk"]
+__all__ = ["KERNEL_FORMS", "SurfaceMesh", "build_mesh", "build_plane_mesh", "interpolate", "interpolation_weights",
+           "kernel_weights", "mesh_of", "tactile_surface", "weights_on_disk"]
 
 KERNEL_FORMS = ("paper", "squared")
 
 
 @dataclass(frozen=True)
 class SurfaceMesh:
-    """Triangle mesh of the contact-side half of the fitted ellipsoid, in the sensor frame.
+    """Triangle mesh of the sensor's surface, in the sensor frame: the contact-side half of the
+    fitted ellipsoid (``kind`` ``ellipsoid``) or a flat rectangle facing −z (``plane``).
 
     Attributes:
         points: (M, 3) vertex positions, mm, sensor frame (ellipsoid centre added).
         normals: (M, 3) unit outward normals.
-        theta, phi: (M,) ellipsoid parameters of each vertex (rad), see :mod:`tactile.ellipsoid`.
+        theta, phi: (M,) ellipsoid parameters of each vertex (rad), see :mod:`tactile.ellipsoid`
+            (zeros on a plane).
         triangles: (F, 3) int32 vertex indices, counter-clockwise seen from outside.
-        centre: (3,) ellipsoid centre, mm.  axes: (3,) semi-axes along x, y, z, mm.
+        centre: (3,) ellipsoid centre (plane: the rectangle's centre), mm.  axes: (3,) semi-axes
+            along x, y, z, mm (plane: half its size along x and y, and 0).
     """
 
     points: np.ndarray
@@ -48,6 +52,7 @@ class SurfaceMesh:
     triangles: np.ndarray
     centre: np.ndarray
     axes: np.ndarray
+    kind: str = "ellipsoid"
 
     @property
     def n_vertices(self) -> int:
@@ -113,6 +118,42 @@ def build_mesh(centre, axes, spacing: float = 0.6) -> SurfaceMesh:
                        triangles=triangles, centre=centre, axes=axes)
 
 
+def build_plane_mesh(centre, size, spacing: float = 0.6) -> SurfaceMesh:
+    """Mesh a flat rectangle facing −z (the contact side) with vertices ~``spacing`` mm apart.
+
+    Args:
+        centre: (3,) the rectangle's centre in the sensor frame, mm.
+        size: (2,) its extent along x and y, mm.
+        spacing: target distance between neighbouring vertices, mm (> 0).
+    """
+    centre = finite_array("centre", centre, ndim=1, last=3)
+    size = finite_array("size", size, ndim=1, last=2)
+    if np.any(size <= 0):
+        raise ValueError(f"size: expected two lengths > 0 mm, got {size.tolist()}")
+    spacing = positive("spacing", spacing)
+    nx, ny = (max(2, int(np.ceil(s / spacing)) + 1) for s in size)
+    x = np.linspace(-size[0] / 2, size[0] / 2, nx)
+    y = np.linspace(-size[1] / 2, size[1] / 2, ny)
+    gx, gy = np.meshgrid(x, y, indexing="ij")                        # vertex (i, j) at index i·ny + j
+    local = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=-1)
+    i, j = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1), indexing="ij")
+    a = (i * ny + j).ravel()
+    b, c, d = a + ny, a + ny + 1, a + 1
+    triangles = np.concatenate([np.stack([a, b, c], -1), np.stack([a, c, d], -1)]).astype(np.int32)
+    normals = np.tile([0.0, 0.0, -1.0], (len(local), 1))
+    triangles = _orient_outward(local + centre, normals, triangles)
+    zeros = np.zeros(len(local))
+    return SurfaceMesh(points=local + centre, normals=normals, theta=zeros, phi=zeros.copy(), triangles=triangles,
+                       centre=centre, axes=np.r_[size / 2, 0.0], kind="plane")
+
+
+def mesh_of(shape, spacing: float) -> SurfaceMesh:
+    """The mesh of a sensor model's surface (a :class:`tactile.sensor.SurfaceShape`)."""
+    if shape.kind == "plane":
+        return build_plane_mesh(shape.centre, shape.extent, spacing)
+    return build_mesh(shape.centre, shape.extent, spacing)
+
+
 def _stitch_rings(i0: int, n0: int, i1: int, n1: int) -> list[tuple[int, int, int]]:
     """Triangulate the band between two closed rings by advancing along both in φ."""
     out = []
@@ -146,7 +187,8 @@ def interpolation_weights(mesh: SurfaceMesh, taxels, sigma: float = 2.0,
 
     Args:
         mesh: the surface mesh.
-        taxels: (24, 3) taxel positions, mm, sensor frame; projected onto the fitted ellipsoid.
+        taxels: (N, 3) taxel positions, mm, sensor frame; projected onto the fitted ellipsoid
+            (on a plane: onto the plane, where the geodesic distance is the straight one).
         sigma: kernel width σ, mm (> 0).
         kernel: ``"paper"`` for exp(−d/(2σ²)) as the method writes it, ``"squared"`` for
             exp(−d²/(2σ²)).
@@ -154,26 +196,32 @@ def interpolation_weights(mesh: SurfaceMesh, taxels, sigma: float = 2.0,
             :func:`tactile.geodesic.geodesic_distances`. Distances are cached on disk.
 
     Returns:
-        (M, 24) weights, rows summing to 1: ``values = activation @ weights.T``.
+        (M, N) weights, rows summing to 1: ``values = activation @ weights.T``.
     """
+    if mesh.kind == "plane":
+        t = finite_array("taxels", taxels, ndim=2, last=3)
+        d = np.linalg.norm(mesh.points[:, None, :2] - t[None, :, :2], axis=-1)
+        return kernel_weights(d, sigma, form=kernel)
     d = cached_geodesic_distances(mesh.axes, mesh.local_points, _on_surface(mesh, taxels), method=geodesic,
                                   cache_dir=cache_dir)
     return kernel_weights(d, sigma, form=kernel)
 
 
 def weights_on_disk(mesh: SurfaceMesh, taxels, geodesic: str = "accurate", cache_dir=None) -> bool:
-    """Whether :func:`interpolation_weights` finds its geodesic distances on disk."""
+    """Whether :func:`interpolation_weights` finds its geodesic distances on disk (a plane needs none)."""
+    if mesh.kind == "plane":
+        return True
     return geodesic_cache_file(mesh.axes, mesh.local_points, _on_surface(mesh, taxels), method=geodesic,
                                cache_dir=cache_dir).exists()
 
 
 def _on_surface(mesh: SurfaceMesh, taxels) -> np.ndarray:
-    """(24, 3) taxel positions (mm, sensor frame) projected onto the mesh's ellipsoid, centred."""
+    """(N, 3) taxel positions (mm, sensor frame) projected onto the mesh's ellipsoid, centred."""
     return project_to_ellipsoid(mesh.axes, finite_array("taxels", taxels, ndim=2, last=3) - mesh.centre)
 
 
 def interpolate(activation, weights) -> np.ndarray:
-    """Taxel values (..., 24) → vertex values (..., M) by one matrix product with ``weights``."""
+    """Taxel values (..., N) → vertex values (..., M) by one matrix product with ``weights``."""
     activation = finite_array("activation", activation, last=weights.shape[1])
     return activation @ weights.T
 

@@ -1,6 +1,6 @@
 """Synthetic activation patterns with known motion, for the demo, tests and benchmarks.
 
-Patterns are defined on the taxels (24 values per sample, kΩ), like real data, so the
+Patterns are defined on the taxels (N values per sample, kΩ: 24 for the BioTac SP), like real data, so the
 whole method — interpolation, surface, frames, flow — is exercised on them.
 """
 
@@ -18,7 +18,7 @@ def moving_bump(taxels, start, velocity, duration: float, rate_hz: float = 100.0
     """A Gaussian bump of activation sliding across the sensor at constant velocity.
 
     Args:
-        taxels: (24, 3) taxel positions, mm.
+        taxels: (N, 3) taxel positions, mm.
         start: (3,) bump centre at t = 0, mm (only x and y are used: the bump is a column
             of pressure along z, as an object pressed onto the pad).
         velocity: (3,) mm/s (x and y used).
@@ -26,7 +26,7 @@ def moving_bump(taxels, start, velocity, duration: float, rate_hz: float = 100.0
         amplitude: peak activation, kΩ.  width: standard deviation of the bump, mm.
 
     Returns:
-        (T, 24) activation, kΩ, T = round(duration × rate_hz).
+        (T, N) activation, kΩ, T = round(duration × rate_hz).
     """
     taxels = finite_array("taxels", taxels, ndim=2, last=3)
     start = finite_array("start", start, ndim=1, last=3)
@@ -34,7 +34,7 @@ def moving_bump(taxels, start, velocity, duration: float, rate_hz: float = 100.0
     n = int(round(positive("duration", duration) * positive("rate_hz", rate_hz)))
     t = np.arange(n) / rate_hz
     centre = start[:2] + t[:, None] * velocity[:2]                      # (T, 2)
-    d2 = ((taxels[None, :, :2] - centre[:, None, :]) ** 2).sum(-1)      # (T, 24)
+    d2 = ((taxels[None, :, :2] - centre[:, None, :]) ** 2).sum(-1)      # (T, N)
     return amplitude * np.exp(-d2 / (2 * positive("width", width) ** 2))
 
 
@@ -44,7 +44,7 @@ def rotating_pattern(taxels, omega: float, duration: float, rate_hz: float = 100
     """Two bumps on opposite sides of ``centre`` turning about the pad normal (z).
 
     ``omega``: angular velocity about +z, rad/s (positive = counter-clockwise seen from +z).
-    ``radius``: distance of each bump from ``centre`` (x, y), mm. Returns (T, 24) kΩ.
+    ``radius``: distance of each bump from ``centre`` (x, y), mm. Returns (T, N) kΩ.
     """
     taxels = finite_array("taxels", taxels, ndim=2, last=3)
     n = int(round(positive("duration", duration) * positive("rate_hz", rate_hz)))

@@ -88,50 +88,52 @@ def _on_disk(module: str, kernel: str) -> bool:
         return True
 
 
-def cold_groups(config, groups=ANALYSIS) -> list[str]:
+def cold_groups(config, groups=ANALYSIS, sensor=None) -> list[str]:
     """The ``groups`` of kernels ``config`` needs that numba has not compiled on this machine
-    (for ``model``: whose geodesic distances are not on disk; with them there, the geodesic
-    kernel is never called)."""
+    (for ``model``: whose geodesic distances for ``sensor`` — a :class:`tactile.sensor.SensorModel`,
+    default the BioTac SP — are not on disk; with them there, the geodesic kernel is never called)."""
     def cold(group):
         if group == "model":
-            return not _model_on_disk(config)
+            return not _model_on_disk(config, sensor)
         return any(not _on_disk(m, k) for m, k in _entries(group, config))
     return [g for g in groups if cold(g)]
 
 
-def _model_on_disk(config) -> bool:
+def _model_on_disk(config, sensor=None) -> bool:
     """Whether the model's geodesic distances are in the disk cache (or it needs none)."""
     from . import surface
     from .pipeline import TactileModel
     if config.geodesic != "accurate":
         return True
     try:
-        taxels, _, mesh = TactileModel.surface_of(config)
+        taxels, _, mesh = TactileModel.surface_of(config, sensor=sensor)
         return surface.weights_on_disk(mesh, taxels, config.geodesic)
     except Exception:  # noqa: BLE001 - the model's own build reports what is wrong
         return True
 
 
-def compile_group(group: str, config) -> None:
-    """Compile (or load) the kernels of ``group`` by running the real code on a few frames."""
+def compile_group(group: str, config, sensor=None) -> None:
+    """Compile (or load) the kernels of ``group`` by running the real code on a few frames
+    (``sensor``: the model whose geodesic distances ``model`` computes; default the BioTac SP)."""
     from . import aggregate, flow, online, signals, surface
     from .pipeline import TactileModel
     rng = np.random.default_rng(0)
     h, w = config.size
     if group == "model":                        # the geodesic distances, computed and cached on disk
-        taxels, _, mesh = TactileModel.surface_of(config)
+        taxels, _, mesh = TactileModel.surface_of(config, sensor=sensor)
         surface.interpolation_weights(mesh, taxels, geodesic=config.geodesic)
     elif group in ("frames", "online"):
         model = _coarse_model(config)
         view = next(iter(model.plans))
-        activation = rng.uniform(0.0, 2.0, (4, 24))
+        n = model.n_taxels
+        activation = rng.uniform(0.0, 2.0, (4, n))
         if group == "frames":
             model.render_uint8(activation, view)
             model.render(activation, view)
         else:                                    # as protocols.live.warm_up: a few frames pushed
-            stream = online.OnlineFlow(model, np.full((1, 24), 10.0), ("ff",), tuple(model.plans))
+            stream = online.OnlineFlow(model, np.full((1, n), 10.0), ("ff",), tuple(model.plans))
             for i in range(3):
-                stream.push(i, 0.01 * i, np.full((1, 24), 3000.0 - 100 * i))
+                stream.push(i, 0.01 * i, np.full((1, n), 3000.0 - 100 * i))
     elif group == "flow":
         frames = rng.integers(0, 255, (6, h, w), dtype=np.uint8)
         mask = np.zeros((h, w), bool)
@@ -140,7 +142,7 @@ def compile_group(group: str, config) -> None:
                        flow.static_flow(frames, np.zeros((h, w), np.uint8), config=config.flow)):
             aggregate.aggregate_flow(fields, mask, noise=config.noise)
     elif group == "signals":
-        counts = rng.normal(0.0, 1.0, (20, 2, 24))
+        counts = rng.normal(0.0, 1.0, (20, 2, 24))              # the kernels' types, not a sensor's shape
         signals.kalman_smooth(counts, R=config.kalman_r, Q=config.kalman_q)
         signals.running_median(counts, 5)
     else:
@@ -171,7 +173,7 @@ def _share_out(groups: list[str], processes: int) -> list[list[str]]:
 
 
 @contextlib.contextmanager
-def compiling(config, workers: int | None = None, console=None, groups=ANALYSIS):
+def compiling(config, workers: int | None = None, console=None, groups=ANALYSIS, sensor=None):
     """Compile the kernels of ``groups`` that ``config`` needs and that are not on disk yet in
     up to ``workers`` (default: the cores available) child processes while the ``with`` body
     runs; wait for them at its end.
@@ -182,7 +184,7 @@ def compiling(config, workers: int | None = None, console=None, groups=ANALYSIS)
     the body stops the children.
     """
     workers = available_cores() if workers is None else workers
-    cold = cold_groups(config, groups) if workers > 1 else []
+    cold = cold_groups(config, groups, sensor) if workers > 1 else []
     if not cold:
         yield
         return
@@ -198,7 +200,7 @@ def compiling(config, workers: int | None = None, console=None, groups=ANALYSIS)
                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
             children.append(child)
             with contextlib.suppress(BrokenPipeError):
-                child.stdin.write(pickle.dumps(config))
+                child.stdin.write(pickle.dumps((config, sensor)))
                 child.stdin.close()
         yield
         deadline = time.monotonic() + WAIT_S
@@ -212,16 +214,16 @@ def compiling(config, workers: int | None = None, console=None, groups=ANALYSIS)
                 child.wait()
 
 
-def compile_cold(config, workers: int | None = None, console=None, groups=ANALYSIS) -> None:
+def compile_cold(config, workers: int | None = None, console=None, groups=ANALYSIS, sensor=None) -> None:
     """:func:`compiling` with nothing else to do meanwhile: returns when the children are done."""
-    with compiling(config, workers, console, groups):
+    with compiling(config, workers, console, groups, sensor):
         pass
 
 
 def _main(groups: list[str]) -> int:
-    config = pickle.load(sys.stdin.buffer)
+    config, sensor = pickle.load(sys.stdin.buffer)
     for group in groups:
-        compile_group(group, config)
+        compile_group(group, config, sensor)
     return 0
 
 

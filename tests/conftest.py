@@ -77,6 +77,20 @@ def model(cache_dir):
     return TactileModel.build(TactileConfig(), cache_dir=cache_dir)
 
 
+#: the sensor models every per-sensor test runs for
+SENSORS = ("biotac_sp", "biotac")
+
+
+@pytest.fixture(scope="session", params=SENSORS)
+def sensor_model(request, cache_dir):
+    """The tactile model of each shipped BioTac (its views, its frame size), for the per-sensor
+    tests; ``model.sensor.shape.pole`` is where its pad touches."""
+    from tactile_flow.tactile.pipeline import TactileConfig, TactileModel
+    from tactile_flow.tactile.sensor import builtin_sensor
+    sensor = builtin_sensor(request.param)
+    return TactileModel.build(TactileConfig(size=sensor.frame_size or (28, 40)), cache_dir=cache_dir, sensor=sensor)
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)

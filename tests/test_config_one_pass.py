@@ -111,7 +111,7 @@ def test_labels_of_ones_own_still_name_a_generic_run():
 @pytest.mark.slow
 def test_a_bad_analysis_view_records_nothing(tmp_path):
     line = one_line(tactile_run(tmp_path, "progress=false", "analysis.views=[bottom,lefft]"))
-    assert line == "error: analysis.views[1]: unknown view; expected one of bottom, left, right; did you mean `left`?"
+    assert line == "error: analysis.views[1]: unknown view of sensor biotac_sp; expected one of bottom, left, right; did you mean `left`?"
     assert not (tmp_path / "outputs").exists()
 
 

@@ -289,6 +289,35 @@ TESTED: dict[str, object] = {
     'tactile-run protocol=straws_sweep live.enabled=true': HERE,
     'tactile-run protocol=straws_sweep surface=sticks':
         "tests/test_first_hour.py::test_the_readmes_same_sweep_on_another_board_succeeds",
+    # ------------------------------------------------------------------ sensor models (docs/sensors.md)
+    'python docs/make_sensor_figures.py':
+        Variant("python docs/make_sensor_figures.py --out {tmp}/sensors", "the figures to a scratch folder"),
+    'python docs/make_sensor_figures.py --sensor my_pad.yaml --out /tmp/check':
+        Variant("python docs/make_sensor_figures.py --sensor tests/data/conf/sensor/flat_pad.yaml --out {tmp}/check",
+                "the test suite's own new model for the guide's my_pad.yaml"),
+    'tactile-run sensor=biotac': Variant("tactile-run sensor=biotac progress=false analysis.figures=false",
+                                         "without figures: the targets are what is checked"),
+    'tactile-run sensor=biotac protocol=pour_grasp':
+        Variant("tactile-run sensor=biotac protocol=pour_grasp plan_only=true", "composed and planned (a 60 s run)"),
+    'tactile-run -m +experiment=slip_in_place_grid sensor=NAME':
+        Variant("tactile-run -m +experiment=slip_in_place_grid sensor=biotac plan_only=true hydra.sweep.dir={tmp}/grid",
+                "72 runs: every job composed and planned for the classic BioTac"),
+    'tactile-run hardware=lab_emulated sensor=biotac':
+        Variant("tactile-run hardware=lab_emulated sensor=biotac plan_only=true",
+                "no emulators running here: checked and planned"),
+    'tactile-run hydra.searchpath=[file://<your configs>] sensor=<name>':
+        "tests/test_flat_pad.py::test_the_flat_pad_runs_end_to_end_from_its_yaml_alone",
+    'tactile-run --cfg job': HERE,
+    'tactile-emulate --sensor biotac': Options("the emulators run until stopped (tests/test_rosbridge.py starts them "
+                                               "with the classic model)"),
+    'tactile-emulate --sensor <your configs>/sensor/<name>.yaml':
+        Options("the emulators run until stopped; --sensor takes a file as sensor= does"),
+    'tactile-import source=lab/classic.csv':
+        "tests/test_import_sensors.py::test_a_csv_of_either_biotac_imports_with_its_model_from_the_electrode_count",
+    'tactile-import source=press.csv hydra.searchpath=[file://my_conf] sensor=my_pad':
+        "tests/test_flat_pad.py::test_the_flat_pad_runs_end_to_end_from_its_yaml_alone",
+    'tactile-analyze run=outputs/imported/classic/run.zarr':
+        "tests/test_sensor_cli.py::test_the_analysis_reads_a_store_with_its_model_and_refuses_another",
 }
 
 
@@ -355,6 +384,8 @@ def a_run(tmp_path_factory) -> Path:
 def _argv(command: str, tmp: Path, run: Path | None = None) -> list[str]:
     words = shlex.split(command.format(tmp=tmp, run=run))
     head = BIN / words[0] if words[0].startswith("tactile-") else sys.executable if words[0] == "python" else words[0]
+    if words[0] == "python" and len(words) > 1 and (ROOT / words[1]).is_file():   # a script of the checkout's
+        words[1] = str(ROOT / words[1])
     return [str(head), *words[1:]]
 
 
@@ -380,7 +411,10 @@ def test_the_command_runs(command, tmp_path, request):
 @pytest.mark.parametrize("command", sorted(c for c, how in TESTED.items() if isinstance(how, Options)))
 def test_a_long_commands_options_are_its_own(command):
     words = shlex.split(command)
-    argv = [sys.executable, *words[1:3]] if words[1] == "-m" else [sys.executable, words[1]]
+    if words[0].startswith("tactile-"):
+        argv = [str(BIN / words[0])]
+    else:
+        argv = [sys.executable, *words[1:3]] if words[1] == "-m" else [sys.executable, words[1]]
     proc = subprocess.run([*argv, "--help"], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-1500:]
     for option in re.findall(r"(?<![\w-])(--[a-z][\w-]*)", command.split(" -- ")[0]):

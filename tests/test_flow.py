@@ -1,4 +1,5 @@
-"""Tactile flow on synthetic contacts whose motion is known."""
+"""Tactile flow on synthetic contacts whose motion is known (for each shipped sensor model:
+the contacts are placed about its pad's lowest point)."""
 
 import numpy as np
 import pytest
@@ -22,11 +23,16 @@ def _angle_diff(a, b):
     return abs((a - b + 180) % 360 - 180)
 
 
+def _pole(model):
+    return np.asarray(model.sensor.shape.pole) * [1, 1, 0]
+
+
 @pytest.mark.parametrize("heading", [0, 180, 90, -90])
-def test_bump_moving_across_the_pad_gives_its_direction(model, rng, heading):
+def test_bump_moving_across_the_pad_gives_its_direction(sensor_model, rng, heading):
+    model = sensor_model
     d = np.array([np.cos(np.radians(heading)), np.sin(np.radians(heading)), 0.0])
     span = 16.0 if heading in (0, 180) else 8.0            # the pad is longer along x
-    act = synthetic.moving_bump(model.taxels, start=-span / 2 * d, velocity=10.0 * d,
+    act = synthetic.moving_bump(model.taxels, start=_pole(model) - span / 2 * d, velocity=10.0 * d,
                                 duration=span / 10.0, rate_hz=RATE)
     act = model.smooth(act + rng.normal(0, 0.07, act.shape))
     found, summary = _sensor_direction(model, act)
@@ -34,27 +40,31 @@ def test_bump_moving_across_the_pad_gives_its_direction(model, rng, heading):
     assert summary["confidence"] > 0.1
 
 
-def test_rotation_about_the_pad_normal_gives_curl_of_its_sign(model):
+def test_rotation_about_the_pad_normal_gives_curl_of_its_sign(sensor_model):
+    model = sensor_model
     for omega, sign in ((1.5, 1), (-1.5, -1)):
         act = synthetic.rotating_pattern(model.taxels, omega=omega, duration=1.5, rate_hz=RATE,
-                                         centre=(0.0, 0.0), radius=5.0)
+                                         centre=tuple(_pole(model)[:2]), radius=5.0)
         result = process_view(model, model.smooth(act), "bottom")
         curl = aggregate.window(result.dynamic, 1, len(act))["curl"]
         assert np.sign(curl) == sign, f"omega={omega} rad/s about +z gave curl {curl:.4f}"
 
 
-def test_static_pattern_has_no_dynamic_flow(model, rng):
-    act = synthetic.moving_bump(model.taxels, start=(2.0, 0, 0), velocity=(0, 0, 0), duration=1.0)
+def test_static_pattern_has_no_dynamic_flow(sensor_model, rng):
+    model = sensor_model
+    act = synthetic.moving_bump(model.taxels, start=_pole(model) + (2.0, 0, 0), velocity=(0, 0, 0), duration=1.0)
     act = model.smooth(act + rng.normal(0, 0.07, act.shape))
     result = process_view(model, act, "bottom")
     assert np.max(result.dynamic.magnitude[5:]) < 0.02   # px/frame
 
 
-def test_static_flow_follows_slow_drift_after_reference(model):
-    # Contact settles at x = 0, then drifts slowly by 3 mm along +y (static-friction creep).
+def test_static_flow_follows_slow_drift_after_reference(sensor_model):
+    # Contact settles at the pad's lowest point, then drifts slowly by 3 mm along +y (static-friction creep).
+    model = sensor_model
     n_settle, n_drift = 50, 150
-    still = synthetic.moving_bump(model.taxels, start=(0, -1.5, 0), velocity=(0, 0, 0), duration=n_settle / RATE)
-    drift = synthetic.moving_bump(model.taxels, start=(0, -1.5, 0), velocity=(0, 3.0 / (n_drift / RATE), 0),
+    start = _pole(model) + (0, -1.5, 0)
+    still = synthetic.moving_bump(model.taxels, start=start, velocity=(0, 0, 0), duration=n_settle / RATE)
+    drift = synthetic.moving_bump(model.taxels, start=start, velocity=(0, 3.0 / (n_drift / RATE), 0),
                                   duration=n_drift / RATE)
     act = model.smooth(np.concatenate([still, drift]))
     ref = flow.contact_reference(act.sum(axis=1), threshold=2.0, settle=10)

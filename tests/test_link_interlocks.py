@@ -7,7 +7,6 @@ not a stale sensor. Each test starts its own emulators (separate processes)."""
 from __future__ import annotations
 
 import json
-import time
 
 import pytest
 import xarray as xr

@@ -8,36 +8,40 @@ import pytest
 
 from tactile_flow.tactile import signals, synthetic
 from tactile_flow.tactile.online import AGGREGATES, OnlineFlow
-from tactile_flow.tactile.pipeline import TactileConfig, TactileModel, process_view
+from tactile_flow.tactile.pipeline import TactileModel, process_view
 
 FINGERS = ("ff", "mf", "th")
 REST = 20
 
 
 @pytest.fixture(scope="module")
-def model(cache_dir):
-    return TactileModel.build(TactileConfig(smooth=False), cache_dir=cache_dir)
+def model(sensor_model, cache_dir):
+    """The online model of each shipped sensor (filter only)."""
+    return TactileModel.build(replace(sensor_model.config, smooth=False), sensor=sensor_model.sensor,
+                              cache_dir=cache_dir)
 
 
 @pytest.fixture(scope="module")
 def record(model):
-    """(T, F, 24) raw counts: a rest stretch, then a bump sliding a different way under
-    each finger, 12-bit and noisy as a BioTac sends them; and the rest impedance (F, 24)."""
+    """(T, F, N) raw counts: a rest stretch, then a bump sliding a different way across the
+    pad under each finger, 12-bit and noisy as a BioTac sends them; and the rest impedance (F, N)."""
     rng = np.random.default_rng(7)
     acts = []
+    n = model.n_taxels
+    pole = np.asarray(model.sensor.shape.pole) * [1, 1, 0]
     for f in range(len(FINGERS)):
         heading = 2 * np.pi * f / len(FINGERS)
         d = np.array([np.cos(heading), np.sin(heading), 0.0])
-        bump = synthetic.moving_bump(model.taxels, -8 * d, 8 * d, duration=1.6)
-        acts.append(np.concatenate([np.zeros((REST, 24)), bump]))
+        bump = synthetic.moving_bump(model.taxels, pole - 8 * d, 8 * d, duration=1.6)
+        acts.append(np.concatenate([np.zeros((REST, n)), bump]))
     act = np.stack(acts, axis=1)
-    z = signals.counts_to_impedance(rng.uniform(1700, 3500, (len(FINGERS), 24))) + act
+    z = signals.counts_to_impedance(rng.uniform(1700, 3500, (len(FINGERS), n))) + act
     counts = np.clip(np.rint(4095.0 / (1.0 + z / 10.0)) + rng.normal(0, 4, z.shape).round(), 1, 4095)
     return counts, signals.baseline_from_rest(counts, 0, REST)
 
 
 def offline(model, counts, baseline, view):
-    """The offline pipeline (filter only) of one finger's (T, 24) counts in one view."""
+    """The offline pipeline (filter only) of one finger's (T, N) counts in one view."""
     act = model.smooth(signals.activation(signals.counts_to_impedance(counts), baseline))
     return process_view(model, act, view), signals.pdc_proxy(act)
 
@@ -221,8 +225,9 @@ def test_reset_restarts_a_finger_and_the_sequence(model, record):
 def test_wrong_shapes_raise_value_error_naming_the_argument(model, record):
     counts, baseline = record
     online = OnlineFlow(model, baseline, FINGERS)
-    with pytest.raises(ValueError, match=r"counts: expected shape \(3, 24\)"):
-        online.push(0, 0.0, counts[0, :, :23])
+    n = model.n_taxels
+    with pytest.raises(ValueError, match=rf"counts: expected shape \(3, {n}\)"):
+        online.push(0, 0.0, counts[0, :, :n - 1])
     with pytest.raises(ValueError, match="counts"):
         online.push(0, 0.0, counts[0, 0])
     with pytest.raises(ValueError, match=r"valid: expected shape \(3,\)"):
@@ -232,7 +237,7 @@ def test_wrong_shapes_raise_value_error_naming_the_argument(model, record):
     with pytest.raises(ValueError, match="baseline_impedance"):
         OnlineFlow(model, baseline[:2], FINGERS)
     with pytest.raises(ValueError, match="baseline_impedance"):
-        OnlineFlow(model, np.full((3, 24), np.nan), FINGERS)
+        OnlineFlow(model, np.full((3, n), np.nan), FINGERS)
     with pytest.raises(ValueError, match="views"):
         OnlineFlow(model, baseline, FINGERS, views=("top",))
     with pytest.raises(ValueError, match="fingers"):
@@ -276,7 +281,8 @@ def test_simulated_sweep_matches_offline(model):
     from tactile_flow.hardware.sim import make_sim_lab
     from tactile_flow.hardware.sim.scenarios import biotac_arrays, straws_sweep
 
-    lab = make_sim_lab({"seed": 3, "fingers": ["ff", "mf"]}, {"kind": "straws", "count": 2, "spacing_mm": 15.0})
+    lab = make_sim_lab({"seed": 3, "fingers": ["ff", "mf"]}, {"kind": "straws", "count": 2, "spacing_mm": 15.0},
+                       sensor=model.sensor)
     with lab:
         b = biotac_arrays(straws_sweep(lab, speed=0.02)["biotac"])
     counts = b["electrodes"]

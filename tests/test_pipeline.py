@@ -63,7 +63,9 @@ def test_bad_input_names_the_argument(model, cache_dir):
         TactileModel.build(TactileConfig(render="fast"), cache_dir=cache_dir)
     with pytest.raises(ValueError, match="views"):
         TactileModel.build(TactileConfig(views=("bottom", "top")), cache_dir=cache_dir)
-    with pytest.raises(ValueError, match="taxels"):
+    with pytest.raises(ValueError, match="taxels: expected at least 6"):
+        TactileModel.build(TactileConfig(), taxels=np.zeros((5, 3)), cache_dir=cache_dir)
+    with pytest.raises(ValueError, match="points: expected points that are not all identical"):
         TactileModel.build(TactileConfig(), taxels=np.zeros((20, 3)), cache_dir=cache_dir)
 
 

@@ -18,7 +18,6 @@ from tactile_flow.analysis.load import load_run
 from tactile_flow.analysis.pipeline import analyse
 from tactile_flow.analysis.preprocess import despike
 from tactile_flow.analysis.run import analyze_run
-from tactile_flow.analysis.slip import CLASSES
 from tactile_flow.importers import ImportSettings, import_source, read_bag, select_fingers
 from tactile_flow.tactile import aggregate as tagg
 from tactile_flow.tactile import contact, signals

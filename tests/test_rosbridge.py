@@ -196,3 +196,19 @@ def test_one_devices_link_dropped_is_that_devices_error_at_once(emu):
             pytest.fail("the BioTacs' lost link was not noticed within 2 s")
         assert time.monotonic() - t0 < 0.5
         hand.check_link()                                                      # the hand's own link is up
+
+
+def test_classic_biotacs_send_19_electrodes_and_a_mismatched_model_is_named():
+    from tactile_flow.tactile.sensor import builtin_sensor
+    with RosbridgeEmulator(seed=5, unconnected=("rf", "lf"), sensor="biotac") as e:
+        cfg = RosbridgeBiotacConfig(RosbridgeConfig(e.url), fingers=("ff", "mf", "th"))
+        with RosbridgeBiotacs(cfg, sensor=builtin_sensor("biotac")) as bt:
+            time.sleep(0.3)
+            f = bt.read()[-1]
+            assert f.electrodes.shape == (3, 19) and f.is_valid() and bt.unconnected == {"rf", "lf"}
+            assert "biotac via Shadow driver" in bt.identity.model
+        bt = RosbridgeBiotacs(RosbridgeBiotacConfig(RosbridgeConfig(e.url), fingers=("ff",),
+                                                    first_frame_timeout_s=0.5))     # the SP's model, by default
+        with pytest.raises(DeviceFaultError, match=r"/rh/tactile sends 19 electrodes per sensor; the sensor model "
+                                                   r"biotac_sp has 24"):
+            bt.connect()

@@ -182,3 +182,34 @@ def test_a_silent_port_times_out_at_connect():
     finally:
         os.close(r)
         os.close(w)
+
+
+# ----------------------------------------------------------------------------- sensor models
+def test_a_frame_of_19_electrodes_round_trips_with_the_classic_model():
+    e = np.arange(57, dtype=np.int16).reshape(3, 19)
+    raw = encode_frame(3, 30_000, FINGERS3, e, [1, 2, 3], [4, 5, 6], [7, 8, 9], np.full((3, 22), 2000))
+    assert len(raw) == HEADER_SIZE + 3 * (19 + 3 + 22) * 2 + 2
+    (f,) = FrameParser(19).feed(raw)
+    assert np.array_equal(f.electrodes, e) and list(f.pdc) == [1, 2, 3] and f.pac.shape == (3, 22)
+    parser = FrameParser()                                 # a BioTac SP's: the frame does not fit
+    assert parser.feed(raw) == [] and parser.other_count == 19
+
+
+@pytest.mark.parametrize("name, n", [("biotac_sp", 24), ("biotac", 19)])
+def test_the_bridge_emulator_and_the_driver_speak_the_models_electrode_count(name, n):
+    from tactile_flow.tactile.sensor import builtin_sensor
+    sensor = builtin_sensor(name)
+    with SerialDevicesEmulator(seed=4, sensor=name) as e:
+        with SerialBiotacs(SerialBiotacConfig(port=e.ports["biotac"], fingers=FINGERS3), sensor=sensor) as bt:
+            time.sleep(0.2)
+            frames = bt.read()
+            assert frames and frames[-1].electrodes.shape == (3, n) and frames[-1].is_valid()
+            assert 1000 < np.median(frames[-1].electrodes) < 3900
+            assert {s.name for s in bt.describe()} == {"biotac", "biotac_pac"}
+            assert bt.describe()[0].coords[1].values[-1] == n
+        other = builtin_sensor("biotac" if name == "biotac_sp" else "biotac_sp")
+        bt = SerialBiotacs(SerialBiotacConfig(port=e.ports["biotac"], fingers=FINGERS3, first_frame_timeout_s=0.5),
+                           sensor=other)
+        with pytest.raises(DeviceFaultError, match=rf"sends {n} electrodes per sensor; the sensor model "
+                                                   rf"{other.name} has {other.n_taxels}"):
+            bt.connect()

@@ -135,7 +135,8 @@ def test_calibration_roundtrip_and_validation():
     with pytest.raises(ValueError):
         cal.baseline_counts[0] = 1.0                        # read-only
     with pytest.raises(ValueError, match="^baseline_counts:"):
-        SensorCalibration(np.full(23, 3000.0), "x")
+        SensorCalibration(np.full((2, 24), 3000.0), "x")          # one count per taxel (the model says how many)
+    assert SensorCalibration(np.full(19, 3000.0), "x").baseline_impedance.shape == (19,)
     with pytest.raises(ValueError, match="^baseline_counts:"):
         SensorCalibration(np.zeros(24), "x")
     with pytest.raises(ValueError, match="^sensor_id:"):

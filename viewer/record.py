@@ -6,9 +6,11 @@ time base, so every stream lines up as recorded. Entities (docs/viewer.md has th
 - ``tactile/<finger>/<view>/frame`` (image), ``.../flow`` (arrows of the dynamic flow field),
   ``.../direction`` (one arrow: the aggregated direction) — at the shown frames;
 - ``flow/<finger>/<view>/direction`` (deg), ``.../magnitude`` (px/frame) — at the shown frames;
-- ``signals/pressure/<finger>``, ``signals/electrodes/<finger>`` (24 series) — every frame;
+- ``signals/pressure/<finger>``, ``signals/electrodes/<finger>`` (one series per taxel of the
+  sensor model: 24 on a BioTac SP, 19 on a classic BioTac) — every frame;
 - ``world/tcp`` (TCP pose), ``world/path`` (its path), ``world/tcp/<finger>/mesh`` (the
-  fingertip's half-ellipsoid coloured by activation, at the shown frames), ``arm/speed``;
+  fingertip's surface — a BioTac's half-ellipsoid, a pad's rectangle — coloured by activation,
+  at the shown frames), ``world/tcp/<finger>/taxels`` (the taxels, named), ``arm/speed``;
 - ``pour/pump_rate``, ``pour/dispensed``, ``pour/mass``;
 - ``protocol/step`` and ``segments/<finger>`` (state lanes), ``events`` (text log);
 - ``live/...`` (the live monitor's rows, when the run recorded them: :func:`viewer.live.send_live`);
@@ -105,15 +107,17 @@ def intensity(scene: Scene) -> str:
 
 
 def send_signals(rec, scene: Scene) -> None:
-    """Pressure and the 24 electrodes per finger, every frame."""
+    """Pressure and the electrodes per finger (named as the sensor model names its taxels), every frame."""
     run, p = scene.run, scene.prepared
     col = times(run.time)
+    n = run.n_taxels
+    names = run.sensor.taxel_names if run.sensor is not None else [f"E{i + 1}" for i in range(n)]
     for k, f in enumerate(run.fingers):
         rec.log(f"signals/pressure/{f}", rr.SeriesLines(names=f, colors=draw.FINGER_COLOURS.get(f)), static=True)
         rec.send_columns(f"signals/pressure/{f}", col, rr.Scalars.columns(scalars=p.pressure[:, k]))
-        rec.log(f"signals/electrodes/{f}", rr.SeriesLines(names=[f"{f} E{i + 1}" for i in range(24)]), static=True)
+        rec.log(f"signals/electrodes/{f}", rr.SeriesLines(names=[f"{f} {name}" for name in names]), static=True)
         rec.send_columns(f"signals/electrodes/{f}", col,
-                         rr.Scalars.columns(scalars=run.electrodes[:, k].ravel()).partition([24] * len(run.time)))
+                         rr.Scalars.columns(scalars=run.electrodes[:, k].ravel()).partition([n] * len(run.time)))
 
 
 def send_pose(rec, scene: Scene) -> None:
@@ -191,17 +195,26 @@ def send_track(rec, track: TactileTrack, scene: Scene, gain: float) -> None:
 
 
 def send_fingertips(rec, scene: Scene) -> None:
-    """Each fingertip's half-ellipsoid (mm, sensor frame) placed at its pose in the TCP frame,
-    coloured by the smoothed activation interpolated at its vertices, at the shown frames."""
+    """Each fingertip's surface (the sensor model's: a BioTac's half-ellipsoid, a pad's rectangle;
+    mm, sensor frame) placed at its pose in the TCP frame, coloured by the smoothed activation
+    interpolated at its vertices, at the shown frames; its taxels as points."""
     model = scene.model
     mesh, m = model.mesh, model.mesh.n_vertices
-    act = scene.prepared.activation[scene.shown]                 # (N, F, 24)
+    act = scene.prepared.activation[scene.shown]                 # (S, F, N)
     for k, f in enumerate(scene.run.fingers):
         pose = scene.fingertips.get(f, np.r_[0.0, 0.05 * k, 0.0, 0.0, 0.0, 0.0])
         rec.log(f"world/tcp/{f}", rr.Transform3D(translation=pose[:3], quaternion=rotvec_to_quaternion(pose[3:]),
                                                  scale=1e-3), static=True)
         rec.log(f"world/tcp/{f}/mesh", rr.Mesh3D(vertex_positions=mesh.points, triangle_indices=mesh.triangles,
                                                  vertex_normals=mesh.normals), static=True)
+        rec.log(f"world/tcp/{f}/taxels", rr.Points3D(model.taxels, radii=0.3, colors=(0, 200, 220),
+                                                     labels=list(_taxel_names(scene))), static=True)
         colours = draw.activation_colours(act[:, k] @ model.weights.T, scene.ranges[:, k])
         rec.send_columns(f"world/tcp/{f}/mesh", times(scene.times),
                          rr.Mesh3D.columns(vertex_colors=colours.reshape(-1, 4)).partition([m] * len(scene.shown)))
+
+
+def _taxel_names(scene: Scene):
+    """The taxel names of the run's sensor model (E1..EN when it has none)."""
+    sensor = scene.run.sensor
+    return sensor.taxel_names if sensor is not None else [f"E{i + 1}" for i in range(scene.model.n_taxels)]

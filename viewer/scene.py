@@ -30,13 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_flow.analysis.config import AnalysisConfigError, load_config
+from tactile_flow.analysis.config import AnalysisConfigError, for_sensor, load_config
 from tactile_flow.analysis.flows import MIN_PEAK_KOHM
 from tactile_flow.analysis.load import AnalysisInputError, RunData, load_run
 from tactile_flow.analysis.pipeline import get_model
 from tactile_flow.analysis.preprocess import PreparedRun, prepare
 from tactile_flow.tactile.aggregate import aggregate_flow
 from tactile_flow.tactile.flow import FlowEstimator
+from tactile_flow.tactile.sensor import SensorModelError
 
 from . import draw
 
@@ -148,15 +149,17 @@ def load_scene(run_dir, fps: float = DEFAULT_FPS) -> Scene:
     store = find_store(run_dir)
     try:
         run = load_run(store)
-    except AnalysisInputError as exc:
+    except (AnalysisInputError, SensorModelError) as exc:
         raise SceneError(str(exc)) from None
     notes = [f"{group}: {why}" for group, why in run.missing.items()]
+    if run.sensor_how != "recorded":
+        notes.append(f"sensor model {run.sensor.name} ({run.sensor_how})")
     try:
-        cfg = load_config(run.config.get("analysis"))
+        cfg = for_sensor(load_config(run.config.get("analysis")), run.sensor)
     except AnalysisConfigError as exc:
         notes.append(f"the run's analysis config is not valid here ({exc}); the defaults are used")
-        cfg = load_config(None)
-    model = get_model(cfg.tactile)
+        cfg = for_sensor(load_config(None), run.sensor)
+    model = get_model(cfg.tactile, run.sensor)
     prepared = prepare(run, cfg, model)
     step = max(1, int(round(run.rate_hz / fps)))
     shown = np.arange(min(1, len(run.time) - 1), len(run.time), step)

@@ -95,12 +95,17 @@ def build_parser():
     parser.add_argument("--surface", default="straws",
                         help="the board the emulated BioTacs press on, following the emulated arm "
                              "(conf/surface/NAME.yaml; the protocol's surface; 'none': resting counts only)")
+    parser.add_argument("--sensor", default="biotac_sp",
+                        help="the emulated BioTacs' sensor model: biotac_sp (default), biotac (classic, 19 "
+                             "electrodes) or a sensor .yaml; run protocols with the same sensor=")
     return parser
 
 
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from .process import emulated_sensor
+    emulated_sensor(args.sensor, parser)                 # a bad model is refused here, not in a child
     surfaces = sorted(p.stem for p in (CONF_DIR / "surface").glob("*.yaml"))
     if args.surface != "none" and args.surface not in surfaces:
         parser.error(f"--surface {args.surface}: expected one of {', '.join(surfaces)} or none")
@@ -122,12 +127,12 @@ def main(argv=None) -> int:
         elif not args.no_ur:
             print("UR controller   not available (hardware/emulators/ur_controller.py missing)")
         ros = RosbridgeEmulator(host="127.0.0.1", port=args.rosbridge_port, seed=args.seed, pose_file=pose_file,
-                                surface=args.surface).start()
+                                surface=args.surface, sensor=args.sensor).start()
         started.append(ros)
         print(f"rosbridge       {ros.url}  (/rh/tactile at 100 Hz, /joint_states, "
               f"/rh_trajectory_controller/command)")
         serial = SerialDevicesEmulator(link_dir=args.link_dir, seed=args.seed, pose_file=pose_file,
-                                       surface=args.surface).start()
+                                       surface=args.surface, sensor=args.sensor).start()
         started.append(serial)
         for name in ("biotac", "pump", "scale"):
             print(f"{name:<15} {Path(args.link_dir) / name} -> {serial.ports[name]}")
@@ -136,7 +141,9 @@ def main(argv=None) -> int:
                                                    "  (the BioTacs press on it following the arm: run protocols "
                                                    f"with surface={args.surface})"))
         env = "" if args.link_dir == "/tmp/tactile-emulate" else f"TACTILE_EMULATE_DIR={args.link_dir} "
+        print(f"sensor          {args.sensor}")
         print(f"\nIn another terminal:  {env}tactile-run hardware=lab_emulated"
+              + ("" if args.sensor == "biotac_sp" else f" sensor={args.sensor}")
               + ("" if args.rosbridge_port == 9090 else f" hardware.rosbridge.url={ros.url}")
               + ("" if args.host == "127.0.0.1" else f" hardware.arm.host={args.host}"))
         print("Ctrl-C stops the emulated lab.", flush=True)

@@ -100,3 +100,14 @@ class EmulatorProcess:
             if line.startswith(prefixes):
                 return line
             seen.append(line)
+
+
+def emulated_sensor(value: str, parser):
+    """The :class:`tactile.sensor.SensorModel` an emulator's ``--sensor`` names: a built-in
+    model (``biotac_sp``, ``biotac``) or a sensor ``.yaml`` file; ``parser.error`` (one line,
+    exit 2) otherwise."""
+    from tactile_flow.tactile.sensor import SensorModelError, builtin_sensor, load_sensor_file
+    try:
+        return load_sensor_file(value) if value.endswith((".yaml", ".yml")) else builtin_sensor(value)
+    except SensorModelError as exc:
+        parser.error(f"--sensor: {exc}")

@@ -35,9 +35,10 @@ import numpy as np
 
 from ..biotac import FINGERS
 from ..hand import JOINT_NAMES
-from .process import EmulatorProcess
+from .process import EmulatorProcess, emulated_sensor
 
 UNCONNECTED = {"pac0": 0, "pac1": 0, "pac": [], "pdc": -22072, "tac": 32570, "tdc": 0, "electrodes": [0] * 24}
+"""A port without a sensor (its ``electrodes`` as long as the model's: :meth:`BiotacSource.message`)."""
 CORRUPTIONS = ("garbage", "overflow", "missing")
 
 
@@ -51,6 +52,8 @@ def corrupted(msg: dict, mode: str) -> dict:
     else:
         tactiles[0].pop("pdc")
     return {**msg, "tactiles": tactiles}
+
+
 TOPIC_TYPES = {"/rh/tactile": "sr_robot_msgs/BiotacAll", "/joint_states": "sensor_msgs/JointState",
                "/rh_trajectory_controller/command": "trajectory_msgs/JointTrajectory"}
 
@@ -96,14 +99,15 @@ class BiotacSource:
     """BiotacAll messages from the simulator's calibrated sensor model: resting counts, or
     pressed by the emulated arm when ``touch`` (:class:`~.touch.EmulatedTouch`) is given."""
 
-    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None):
+    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None, sensor=None):
         from ..config import SensorModelConfig
         from ..sim.sensor import BiotacModel, SensorInputs
 
         self.connected = [f for f in FINGERS if f not in unconnected]
         F = len(self.connected)
-        self.model = BiotacModel(self.connected, SensorModelConfig(), np.random.default_rng(seed), 1.0 / rate_hz)
-        self.inputs = SensorInputs(np.zeros((F, 24)), np.zeros(F), np.zeros(F), np.zeros(F))
+        self.model = BiotacModel(self.connected, SensorModelConfig(), np.random.default_rng(seed), 1.0 / rate_hz,
+                                 sensor)
+        self.inputs = SensorInputs(np.zeros((F, self.model.N)), np.zeros(F), np.zeros(F), np.zeros(F))
         self.touch = touch
         self.seq = 0
         self.t0 = time.monotonic()
@@ -117,7 +121,7 @@ class BiotacSource:
         tactiles = []
         for f in FINGERS:
             if f not in self.connected:
-                tactiles.append(dict(UNCONNECTED))
+                tactiles.append({**UNCONNECTED, "electrodes": [0] * self.model.N})
                 continue
             k = self.connected.index(f)
             p = [int(x) for x in pac[k]]
@@ -129,10 +133,10 @@ class BiotacSource:
 class Bridge:
     """Server state: clients and their subscriptions, the hand, the BioTacs, counters."""
 
-    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None):
+    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None, sensor=None):
         self.clients: set = set()
         self.hand = HandModel()
-        self.biotacs = BiotacSource(unconnected, seed, rate_hz, touch)
+        self.biotacs = BiotacSource(unconnected, seed, rate_hz, touch, sensor)
         self.rate_hz = rate_hz
         self.paused = False
         self.published = {"/rh/tactile": 0, "/joint_states": 0}
@@ -275,8 +279,9 @@ class RosbridgeEmulator(EmulatorProcess):
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, seed: int = 0, unconnected=(),
-                 rate_hz: float = 100.0, pose_file: str | None = None, surface: str = "straws"):
-        args = ["--host", host, "--port", port, "--seed", seed, "--rate", rate_hz]
+                 rate_hz: float = 100.0, pose_file: str | None = None, surface: str = "straws",
+                 sensor: str = "biotac_sp"):
+        args = ["--host", host, "--port", port, "--seed", seed, "--rate", rate_hz, "--sensor", sensor]
         if unconnected:
             args += ["--unconnected", ",".join(unconnected)]
         if pose_file:
@@ -304,15 +309,17 @@ def main(argv=None) -> int:
     p.add_argument("--unconnected", default="", help="fingers without a sensor, e.g. rf,lf")
     p.add_argument("--pose-file", default=None, help="press the BioTacs following this TCP pose (touch.py)")
     p.add_argument("--surface", default="straws", help="the board pressed on (conf/surface/NAME.yaml)")
+    p.add_argument("--sensor", default="biotac_sp", help="the BioTacs' sensor model: a name (conf/sensor/) or a .yaml")
     a = p.parse_args(argv)
     unconnected = [f for f in a.unconnected.split(",") if f]
     if any(f not in FINGERS for f in unconnected):
         p.error(f"--unconnected: expected names of {FINGERS}, got {unconnected}")
+    sensor = emulated_sensor(a.sensor, p)
     touch = None
     if a.pose_file:
         from .touch import EmulatedTouch
-        touch = EmulatedTouch(a.pose_file, a.surface, [f for f in FINGERS if f not in unconnected])
-    bridge = Bridge(unconnected, a.seed, a.rate, touch)
+        touch = EmulatedTouch(a.pose_file, a.surface, [f for f in FINGERS if f not in unconnected], sensor)
+    bridge = Bridge(unconnected, a.seed, a.rate, touch, sensor)
     try:
         asyncio.run(serve(a.host, a.port, bridge))
     except OSError as exc:

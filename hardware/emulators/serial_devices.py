@@ -35,7 +35,7 @@ import numpy as np
 from ..biotac import FINGERS
 from ..serial_biotac import encode_frame
 from ..serial_pour import format_weight_line
-from .process import EmulatorProcess
+from .process import EmulatorProcess, emulated_sensor
 
 FIRMWARE = "2.4-emulated"
 
@@ -108,7 +108,7 @@ class BiotacBridge:
     """Sends BioTac frames (sim sensor model) at ``rate_hz`` with injectable faults: resting,
     or pressed by the emulated arm when ``touch`` (:class:`~.touch.EmulatedTouch`) is given."""
 
-    def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0, touch=None):
+    def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0, touch=None, sensor=None):
         from ..config import SensorModelConfig
         from ..sim.sensor import BiotacModel, SensorInputs
 
@@ -116,9 +116,9 @@ class BiotacBridge:
         self.fingers = tuple(fingers)
         self.rate_hz = rate_hz
         self.rng = np.random.default_rng(seed)
-        self.model = BiotacModel(self.fingers, SensorModelConfig(), self.rng, 1.0 / rate_hz)
+        self.model = BiotacModel(self.fingers, SensorModelConfig(), self.rng, 1.0 / rate_hz, sensor)
         F = len(self.fingers)
-        self.inputs = SensorInputs(np.zeros((F, 24)), np.zeros(F), np.zeros(F), np.zeros(F))
+        self.inputs = SensorInputs(np.zeros((F, self.model.N)), np.zeros(F), np.zeros(F), np.zeros(F))
         self.touch = touch
         self.t0 = time.monotonic()
         self.seq = 0
@@ -292,8 +292,8 @@ class SerialLab:
     """The three devices of one emulator process."""
 
     def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0,
-                 pump_max_rate_ml_min: float = 150.0, reservoir_g: float = 1500.0, touch=None):
-        self.biotac = BiotacBridge(fingers, rate_hz, seed, touch)
+                 pump_max_rate_ml_min: float = 150.0, reservoir_g: float = 1500.0, touch=None, sensor=None):
+        self.biotac = BiotacBridge(fingers, rate_hz, seed, touch, sensor)
         self.pump_state = EmulatedPump(pump_max_rate_ml_min)
         self.pump = PumpDevice(self.pump_state)
         self.scale = ScaleDevice(self.pump_state, reservoir_g, seed=seed)
@@ -351,9 +351,10 @@ class SerialDevicesEmulator(EmulatorProcess):
     """
 
     def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0, link_dir: str | None = None,
-                 pump_max_rate_ml_min: float = 150.0, pose_file: str | None = None, surface: str = "straws"):
+                 pump_max_rate_ml_min: float = 150.0, pose_file: str | None = None, surface: str = "straws",
+                 sensor: str = "biotac_sp"):
         args = ["--fingers", ",".join(fingers), "--rate", rate_hz, "--seed", seed,
-                "--pump-max-rate", pump_max_rate_ml_min]
+                "--pump-max-rate", pump_max_rate_ml_min, "--sensor", sensor]
         if link_dir:
             args += ["--link-dir", link_dir]
         if pose_file:
@@ -381,16 +382,18 @@ def main(argv=None) -> int:
     p.add_argument("--link-dir", default=None)
     p.add_argument("--pose-file", default=None, help="press the BioTacs following this TCP pose (touch.py)")
     p.add_argument("--surface", default="straws", help="the board pressed on (conf/surface/NAME.yaml)")
+    p.add_argument("--sensor", default="biotac_sp", help="the BioTacs' sensor model: a name (conf/sensor/) or a .yaml")
     a = p.parse_args(argv)
     fingers = [f for f in a.fingers.split(",") if f]
     bad = [f for f in fingers if f not in FINGERS]
     if bad:
         p.error(f"--fingers: unknown {bad}; expected names of {FINGERS}")
+    sensor = emulated_sensor(a.sensor, p)
     touch = None
     if a.pose_file:
         from .touch import EmulatedTouch
-        touch = EmulatedTouch(a.pose_file, a.surface, fingers)
-    lab = SerialLab(fingers, a.rate, a.seed, a.pump_max_rate, touch=touch)
+        touch = EmulatedTouch(a.pose_file, a.surface, fingers, sensor)
+    lab = SerialLab(fingers, a.rate, a.seed, a.pump_max_rate, touch=touch, sensor=sensor)
     if a.link_dir:
         link_ports(lab.ports(), a.link_dir)
     lab.start()

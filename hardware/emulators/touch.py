@@ -67,9 +67,10 @@ class PoseFile:
 
 
 class EmulatedTouch:
-    """Sensor inputs of ``fingers`` for the pose in ``pose_file``, on the board ``surface``."""
+    """Sensor inputs of ``fingers`` for the pose in ``pose_file``, on the board ``surface``
+    (``sensor``: the fingertips' :class:`tactile.sensor.SensorModel`, default the BioTac SP)."""
 
-    def __init__(self, pose_file, surface: str, fingers):
+    def __init__(self, pose_file, surface: str, fingers, sensor=None):
         from omegaconf import OmegaConf
 
         from ..config import load_config
@@ -81,7 +82,7 @@ class EmulatedTouch:
             raise ValueError(f"--surface {surface}: no conf/surface/{surface}.yaml; expected one of "
                              f"{sorted(p.stem for p in SURFACES_DIR.glob('*.yaml'))}")
         cfg = load_config({"fingers": list(fingers), "stage": None, "pour": {"bottle_in_hand": False}})
-        self.world = SimWorld(cfg, load_surface(OmegaConf.to_container(OmegaConf.load(path), resolve=True)))
+        self.world = SimWorld(cfg, load_surface(OmegaConf.to_container(OmegaConf.load(path), resolve=True)), sensor)
         self.fingers = tuple(fingers)
         self.pose = PoseFile(pose_file)
 

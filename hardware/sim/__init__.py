@@ -26,17 +26,18 @@ __all__ = ["Lab", "make_sim_lab", "SimConfig", "SurfaceConfig", "load_config", "
 
 
 def make_sim_lab(cfg=None, surface=None, *, hardware_key: str = "hardware",
-                 surface_key: str = "surface") -> Lab:
+                 surface_key: str = "surface", sensor=None) -> Lab:
     """Build the simulated lab; devices are returned unconnected.
 
     ``cfg``: dict / OmegaConf node / :class:`SimConfig` mirroring ``conf/hardware/sim.yaml``
     (None: defaults). ``surface``: dict / OmegaConf / :class:`SurfaceConfig` as in
-    ``conf/surface/*.yaml`` (None: no board). Every value is validated first; a bad one
-    raises :class:`~hardware.errors.ConfigError` (a ValueError) naming its key.
+    ``conf/surface/*.yaml`` (None: no board). ``sensor``: the fingertips' model, a
+    :class:`tactile.sensor.SensorModel` (None: the BioTac SP). Every value is validated
+    first; a bad one raises :class:`~hardware.errors.ConfigError` (a ValueError) naming its key.
     """
     c = load_config(cfg, hardware_key)
     surf = load_surface(surface, surface_key) if surface is not None else None
-    world = SimWorld(c, surf)
+    world = SimWorld(c, surf, sensor)
     clock = SimClock(world, realtime=c.realtime)
     return Lab(arm=SimArm(world, clock), hand=SimHand(world, clock), biotac=SimBiotac(world, clock),
                pump=SimPump(world, clock), scale=SimScale(world, clock), clock=clock, world=world,

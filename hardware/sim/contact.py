@@ -1,7 +1,8 @@
 """Fingertip contact and BioTac response: pure functions on arrays.
 
-The fingertip is the ellipsoid fitted to the 24 taxel positions (``tactile.geometry``),
-sampled on its contact half (θ ∈ [π/2, π]). Each sample point carries an area (mm²).
+The fingertip is the surface of the sensor model (:mod:`tactile.sensor`): for the BioTacs the
+ellipsoid fitted to their taxels, sampled on its contact half (θ ∈ [π/2, π]); for a flat pad
+its rectangle, on a grid. Each sample point carries an area (mm²).
 Against a height map, every point below the surface is indented by the vertical depth d
 (mm) and pushes with local pressure ``k·d^n`` (N/mm², a Winkler foundation with a
 Hertz-like exponent); summed over areas that is the normal force. Each taxel feels the
@@ -22,15 +23,16 @@ from tactile_flow.tactile import geometry
 
 @dataclass(frozen=True)
 class Fingertip:
-    """Sampled contact half of the BioTac skin, sensor frame, mm.
+    """Sampled contact side of the sensor's skin, sensor frame, mm.
 
     Attributes:
-        points: (M, 3) points on the fitted ellipsoid (centre added), mm.
+        points: (M, 3) points on the surface (centre added), mm.
         area: (M,) area represented by each point, mm².
-        taxels: (24, 3) taxel positions, mm.
-        kernel: (24, M) taxel footprint: the share of a force at each point the taxel feels
+        taxels: (N, 3) taxel positions, mm.
+        kernel: (N, M) taxel footprint: the share of a force at each point the taxel feels
             (Gaussian of the distance, 1 at the taxel).
-        pole: (3,) lowest point of the pad (θ = π), mm.
+        pole: (3,) lowest point of the pad (θ = π; a flat pad's centre), mm.
+        centre: (3,) the surface's centre, mm; ``reach_mm``: radius about it holding the surface.
     """
 
     points: np.ndarray
@@ -40,6 +42,11 @@ class Fingertip:
     pole: np.ndarray
     centre: np.ndarray
     axes: np.ndarray
+    reach_mm: float = 0.0
+
+    @property
+    def n_taxels(self) -> int:
+        return len(self.taxels)
 
     @property
     def points_m(self) -> np.ndarray:
@@ -50,10 +57,18 @@ class Fingertip:
         object.__setattr__(self, "_points_m", self.points * 1e-3)
 
 
-def build_fingertip(n_theta: int = 28, n_phi: int = 56, sigma_mm: float = 3.0) -> Fingertip:
-    """Sample the contact half of the fitted BioTac ellipsoid on a (θ, φ) grid."""
-    taxels = geometry.load_taxels()
-    fit = geometry.cached_fit_ellipsoid(taxels)
+def build_fingertip(n_theta: int = 28, n_phi: int = 56, sigma_mm: float = 3.0, sensor=None) -> Fingertip:
+    """Sample the contact half of the sensor's ellipsoid on a (θ, φ) grid (a flat pad: an
+    ``n_theta`` × ``n_phi`` grid over its rectangle). ``sensor``: a
+    :class:`tactile.sensor.SensorModel`, default the BioTac SP."""
+    if sensor is None:
+        from tactile_flow.tactile.sensor import builtin_sensor
+        sensor = builtin_sensor()
+    taxels = np.array(sensor.taxels)
+    shape = sensor.shape
+    if shape.kind == "plane":
+        return _flat_fingertip(taxels, shape, n_theta, n_phi, sigma_mm)
+    fit = geometry.EllipsoidFit(centre=shape.centre, axes=shape.extent, rms=shape.rms_mm)
     a, b, c = fit.axes
     dth, dph = (np.pi / 2) / n_theta, 2 * np.pi / n_phi
     th = np.pi / 2 + (np.arange(n_theta) + 0.5) * dth
@@ -68,7 +83,21 @@ def build_fingertip(n_theta: int = 28, n_phi: int = 56, sigma_mm: float = 3.0) -
     d2 = ((taxels[:, None, :] - points[None, :, :]) ** 2).sum(-1)
     kern = np.exp(-d2 / (2 * sigma_mm ** 2))
     pole = fit.centre + np.array([0.0, 0.0, -c])
-    return Fingertip(points, area, taxels, kern, pole, fit.centre, fit.axes)
+    return Fingertip(points, area, taxels, kern, pole, fit.centre, fit.axes, shape.reach_mm)
+
+
+def _flat_fingertip(taxels, shape, nx: int, ny: int, sigma_mm: float) -> Fingertip:
+    """A flat pad's rectangle sampled on an ``nx`` × ``ny`` grid of equal cells."""
+    (sx, sy), centre = shape.extent, shape.centre
+    x = (np.arange(nx) + 0.5) / nx * sx - sx / 2
+    y = (np.arange(ny) + 0.5) / ny * sy - sy / 2
+    gx, gy = (g.ravel() for g in np.meshgrid(x, y, indexing="ij"))
+    points = np.stack([gx, gy, np.zeros_like(gx)], -1) + centre
+    area = np.full(len(points), sx * sy / (nx * ny))
+    d2 = ((taxels[:, None, :] - points[None, :, :]) ** 2).sum(-1)
+    kern = np.exp(-d2 / (2 * sigma_mm ** 2))
+    return Fingertip(points, area, taxels, kern, np.array(centre), np.array(centre), np.r_[sx / 2, sy / 2, 0.0],
+                     shape.reach_mm)
 
 
 def indentation(points_z, surface_z) -> np.ndarray:
@@ -83,7 +112,7 @@ def point_forces(indent_mm, area_mm2, stiffness: float, exponent: float) -> np.n
 
 def shear_loads(taxels, centre, direction, shear_n: float, gain: float, length_mm: float,
                 unload_ratio: float = 0.3) -> np.ndarray:
-    """(24,) taxel load (N-equivalent) from a tangential traction ``shear_n`` along ``direction``.
+    """(N,) taxel load (N-equivalent) from a tangential traction ``shear_n`` along ``direction``.
 
     The skin is pushed towards the side the traction points to: taxels on the leading
     side (positive offset along ``direction`` from the contact ``centre``) load, those on
@@ -101,8 +130,8 @@ def impedance_kohm(z0, load_n, shear_load, total_n, saturation_load_n: float, sh
                    far_rise_per_n: float) -> np.ndarray:
     """Electrode impedance (kΩ) under load.
 
-    ``z0`` (..., 24) resting impedance; ``load_n`` (..., 24) normal load in each taxel's
-    footprint (N, ≥ 0); ``shear_load`` (..., 24) tangential load (N-equivalent, negative
+    ``z0`` (..., N) resting impedance; ``load_n`` (..., N) normal load in each taxel's
+    footprint (N, ≥ 0); ``shear_load`` (..., N) tangential load (N-equivalent, negative
     where shear unloads); ``total_n`` (...,) total normal force.
 
     The skin pressed towards an electrode thins the conductive fluid over it and the
@@ -127,13 +156,14 @@ def contact_noise_kohm(z, z_unloaded, fraction: float) -> np.ndarray:
     return fraction * np.abs(np.asarray(z) - np.asarray(z_unloaded))
 
 
-def counts_from_impedance(z_kohm) -> np.ndarray:
-    """Inverse of ``tactile.signals.counts_to_impedance``: ``E = 4095 / (1 + Z/10kΩ)`` (float)."""
-    return 4095.0 / (1.0 + np.asarray(z_kohm) / 10.0)
+def counts_from_impedance(z_kohm, counts_max: float = 4095.0, reference_kohm: float = 10.0) -> np.ndarray:
+    """Inverse of ``tactile.signals.counts_to_impedance``: ``E = 4095 / (1 + Z/10kΩ)`` (float;
+    ``counts_max``, ``reference_kohm``: the sensor model's electrodes)."""
+    return counts_max / (1.0 + np.asarray(z_kohm) / reference_kohm)
 
 
-def impedance_from_counts(counts) -> np.ndarray:
-    return (4095.0 / np.asarray(counts, float) - 1.0) * 10.0
+def impedance_from_counts(counts, counts_max: float = 4095.0, reference_kohm: float = 10.0) -> np.ndarray:
+    return (counts_max / np.asarray(counts, float) - 1.0) * reference_kohm
 
 
 def pdc_rise(total_n, counts_per_n: float, saturation_n: float) -> np.ndarray:

@@ -270,12 +270,13 @@ class SimHand(_SimDevice, Hand):
 # ====================================================================== biotac
 class SimBiotac(_SimDevice, TactileSensors):
     kind = "biotac"
-    model = "SimBiotac (BioTac SP)"
 
     def __init__(self, world, clock):
         super().__init__(world, clock, world.cfg.biotac_rate_hz)
         self._fingers = tuple(world.fingers)
-        self.sensor = BiotacModel(self._fingers, world.cfg.sensor, self.rng, world.frame_dt)
+        self.sensor_model = world.sensor
+        self.model = f"SimBiotac ({world.sensor.name})"
+        self.sensor = BiotacModel(self._fingers, world.cfg.sensor, self.rng, world.frame_dt, world.sensor)
         self._session = self.sensor.session_calibration(world.rngs["calibration"])
         self.seq = 0
         f = world.cfg.faults
@@ -321,11 +322,12 @@ class SimBiotac(_SimDevice, TactileSensors):
         half = w.frame_dt / 2
         if self._corrupt and any(abs(tc - t) < half for tc in self._corrupt):
             F = len(self._fingers)
-            e = self.rng.integers(-32768, 32767, (F, 24))
+            e = self.rng.integers(-32768, 32767, (F, self.n_taxels))
             pdc = self.rng.integers(-32768, 32767, F)
             w.truth.fault("biotac_corrupt", t, f"seq={self.seq}")
         frame = BiotacFrame(self.seq, self.device_time(t), self.host_time(t), e.astype(np.int16),
-                            pdc.astype(np.int32), tdc.astype(np.int32), tac.astype(np.int32), pac.astype(np.int16))
+                            pdc.astype(np.int32), tdc.astype(np.int32), tac.astype(np.int32), pac.astype(np.int16),
+                            self.sensor.counts_max)
         self._push(frame)
         self._publish(frame)
 

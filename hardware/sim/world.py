@@ -34,15 +34,15 @@ DEVICE_STREAMS = ("arm", "hand", "biotac", "pump", "scale", "world", "stage", "c
 
 
 @lru_cache(maxsize=4)
-def _fingertip(n_theta: int, n_phi: int, sigma: float) -> Fingertip:
-    return build_fingertip(n_theta, n_phi, sigma)
+def _fingertip(n_theta: int, n_phi: int, sigma: float, sensor) -> Fingertip:
+    return build_fingertip(n_theta, n_phi, sigma, sensor)
 
 
 @dataclass
 class FingerContact:
     """One finger's contact at one frame (sensor frame unless stated).
 
-    ``load``: (24,) normal load in each taxel's footprint, N; ``shear_load``: (24,) shear load
+    ``load``: (N,) normal load in each taxel's footprint, N; ``shear_load``: (N,) shear load
     N-equivalent; ``force``: normal force N; ``friction``: sliding friction N;
     ``force_world``/``point_world``: (3,) for the wrench.
     """
@@ -61,8 +61,12 @@ class FingerContact:
 
 
 class SimWorld:
-    def __init__(self, cfg: SimConfig, surface: Surface | None):
-        self.cfg, self.surface = cfg, surface
+    def __init__(self, cfg: SimConfig, surface: Surface | None, sensor=None):
+        """``sensor``: the :class:`tactile.sensor.SensorModel` of the fingertips (default the BioTac SP)."""
+        if sensor is None:
+            from tactile_flow.tactile.sensor import builtin_sensor
+            sensor = builtin_sensor()
+        self.cfg, self.surface, self.sensor = cfg, surface, sensor
         self.dt = cfg.step_s
         self.tick = 0
         self.lock = threading.RLock()
@@ -79,9 +83,9 @@ class SimWorld:
         self.frame_dt = self.frame_ticks * self.dt
         self.fingers = tuple(cfg.fingers)
         c = cfg.contact
-        self.tip = _fingertip(c.mesh_theta, c.mesh_phi, cfg.sensor.kernel_sigma_mm)
+        self.tip = _fingertip(c.mesh_theta, c.mesh_phi, cfg.sensor.kernel_sigma_mm, sensor)
         self._pole_m = self.tip.pole * 1e-3            # (3,) the pad's lowest point, sensor frame, m
-        self._reach_m = self.tip.axes.max() * 1e-3     # the ellipsoid's bounding sphere radius, m
+        self._reach_m = self.tip.reach_mm * 1e-3       # the surface's bounding sphere radius, m
         self.T_tcp_sensor = {f: pose_to_matrix(np.asarray(cfg.fingertips[f], float)) for f in self.fingers}
         # arm
         home = np.asarray(cfg.arm.home_pose, float)
@@ -109,7 +113,7 @@ class SimWorld:
         g[2] = 0.0
         self.g_sensor = g / (np.linalg.norm(g) or 1.0)
         # contacts (latest frame) and the previous forces for dF/dt
-        self.contacts = {f: FingerContact(np.zeros(24)) for f in FINGERS}
+        self.contacts = {f: FingerContact(np.zeros(self.tip.n_taxels)) for f in FINGERS}
         self._prev_force = {f: 0.0 for f in FINGERS}
         self._prev_shear = {f: 0.0 for f in FINGERS}
         self.force_rate = {f: 0.0 for f in FINGERS}
@@ -367,7 +371,7 @@ class SimWorld:
         speed = float(np.linalg.norm(v_t))
         slide = math.tanh(speed / cc.slip_speed_m_s)
         friction = cc.friction * F * slide
-        shear = np.zeros(24)
+        shear = np.zeros(tip.n_taxels)
         if speed > 0:
             u = v_t / speed
             shear = shear_loads(tip.taxels, centre, u, friction, sc.shear_gain, sc.shear_length_mm)
@@ -389,13 +393,13 @@ class SimWorld:
     def _no_contact(self, t, finger, pole_u, v_world, Rs) -> FingerContact:
         self.skin[finger].relax()
         self.truth.update_finger(t, finger, 0.0, set(), pole_u, v_world, Rs, False)
-        return FingerContact(np.zeros(24))
+        return FingerContact(np.zeros(self.tip.n_taxels))
 
     def _skin_contact(self, t, finger, pressed, fp, F, centre, ps, Rs):
         """The skin on the object stage (:mod:`hardware.sim.skin`): step its stick/slip state by
         the object's motion at the contact since the last frame and return the footprint loads
-        of the carried pressure (24,) N, the traction on the finger (3,) N (base frame), the
-        shear loads (24,) and whether the skin broke away."""
+        of the carried pressure (N,) N, the traction on the finger (3,) N (base frame), the
+        shear loads (N,) and whether the skin broke away."""
         tip, cc, sc, sk = self.tip, self.cfg.contact, self.cfg.sensor, self.skin[finger]
         c_world = ps + Rs @ (centre * 1e-3)
         moved, turned = self.stage.moved(c_world[:2])
@@ -407,7 +411,7 @@ class SimWorld:
             self.truth.slipped(finger, t)
         points = tip.points[pressed]
         load = skin.footprint_loads(tip.taxels, skin.displaced(points, centre, sk), fp[pressed], sc.kernel_sigma_mm)
-        shear = np.zeros(24)
+        shear = np.zeros(tip.n_taxels)
         n = float(np.hypot(*sk.stretch))
         if n > 0:
             shear = shear_loads(tip.taxels, centre, np.r_[sk.stretch / n, 0.0], sk.traction_n, sc.shear_gain,
@@ -431,7 +435,7 @@ class SimWorld:
         return end
 
     def _grasp_patch(self, stretch_mm: float, rotation_rad: float):
-        """(24,) taxel loads of a unit-force bottle patch, its centre (sensor, mm) and the bottle
+        """(N,) taxel loads of a unit-force bottle patch, its centre (sensor, mm) and the bottle
         axis on the pad (3,), cached: the patch is elongated along the bottle's axis (gravity),
         shifted by the skin stretch and turned with the bottle (the skin under the contact
         sticks to it)."""
