@@ -13,6 +13,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tactile_flow.tactile import flow as tflow
+from tactile_flow.tactile.frames import DEFAULT_VIEWS
+from tactile_flow.tactile.geodesic import GEODESIC_METHODS
+from tactile_flow.tactile.surface import KERNEL_FORMS
 from tactile_flow.tactile.pipeline import TactileConfig
 from tactile_flow.validation import ConfigError, build, spec, unknown_key
 
@@ -180,7 +183,10 @@ def _positive(key: str, value: float) -> None:
 
 
 def load_config(node=None) -> AnalysisConfig:
-    """Validate the ``analysis`` node (DictConfig, dict or None for the defaults)."""
+    """Validate the ``analysis`` node (DictConfig, dict or None for the defaults); an
+    :class:`AnalysisConfig` (checked already) is returned as it is."""
+    if isinstance(node, AnalysisConfig):
+        return node
     raw = _plain(node)
     d = dict(raw)
     known = {"enabled", "tactile", "views", "flow", "baseline", "pressure", "segmentation", "estimates",
@@ -212,7 +218,14 @@ def load_config(node=None) -> AnalysisConfig:
     views = d.get("views", ["bottom", "left", "right"])
     if not isinstance(views, list) or not views or not all(isinstance(v, str) for v in views):
         raise AnalysisConfigError(f"analysis.views: expected a non-empty list of view names, got {views!r}")
+    for i, view in enumerate(views):
+        if view not in DEFAULT_VIEWS:
+            raise AnalysisConfigError(f"analysis.views[{i}]", unknown_key("analysis.views", view, DEFAULT_VIEWS,
+                                                                          what="view").message)
     tk = {k: _typed(f"tactile.{k}", v, _TACTILE_KEYS[k]) for k, v in tac.items()}
+    for k, choices in (("render", ("exact", "linear")), ("kernel", KERNEL_FORMS), ("geodesic", GEODESIC_METHODS)):
+        if k in tk and tk[k] not in choices:
+            raise AnalysisConfigError(f"analysis.tactile.{k}", f"got {tk[k]!r}; expected one of {', '.join(choices)}")
     for k in ("size", "intensity_range"):
         if k in tk:
             if len(tk[k]) != 2:

@@ -87,14 +87,16 @@ class StoredElectrodes:
         return StoredElectrodes(self._array, base[keep], self._on_error)
 
 
-def screen_counts(source) -> tuple[np.ndarray, np.ndarray, str]:
+def screen_counts(source) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
     """One pass over the stored electrodes (T, F, 24) counts: which fingers read all 24
-    electrodes in range in each frame, which frames read 0 everywhere, and a checksum.
+    electrodes in range in each frame, which frames read 0 everywhere, which read the
+    saturated 4095 everywhere, and a checksum.
 
-    Returns ``(in_range (T, F) bool, all_zero (T,) bool, sha256 hex)``; the checksum is of the
-    counts as float64, frame after frame (the same for a plain array and a stored source)."""
+    Returns ``(in_range (T, F) bool, all_zero (T,) bool, all_saturated (T,) bool, sha256 hex)``;
+    the checksum is of the counts as float64, frame after frame (the same for a plain array and
+    a stored source)."""
     lo, hi = COUNT_RANGE
-    in_range, zero = [], []
+    in_range, zero, saturated = [], [], []
     h = hashlib.sha256()
     chunks = source.chunks() if isinstance(source, StoredElectrodes) else \
         ((a, source[a:a + READ_FRAMES]) for a in range(0, len(source), READ_FRAMES))
@@ -102,7 +104,9 @@ def screen_counts(source) -> tuple[np.ndarray, np.ndarray, str]:
         c = np.ascontiguousarray(c, float)
         in_range.append(np.all((c >= lo) & (c <= hi), axis=2))
         zero.append(np.all(c == 0, axis=(1, 2)))
+        saturated.append(np.all(c >= 4095, axis=(1, 2)))
         h.update(c.tobytes())
     F = source.shape[1]
     return (np.concatenate(in_range) if in_range else np.zeros((0, F), bool),
-            np.concatenate(zero) if zero else np.zeros(0, bool), h.hexdigest())
+            np.concatenate(zero) if zero else np.zeros(0, bool),
+            np.concatenate(saturated) if saturated else np.zeros(0, bool), h.hexdigest())

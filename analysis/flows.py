@@ -113,7 +113,7 @@ def compute(prepared, contacts: dict[str, list[tuple[int, int]]], fingers: list[
     ``threshold``: finger → its level, for the contact onset; ``workers``: threads
     running the (window, view) jobs.
     """
-    from tqdm import tqdm
+    from tactile_flow.cliapp.progress import progress_bar
     views = list(model.plans)
     T = prepared.activation.shape[0]
     jobs = []
@@ -122,7 +122,7 @@ def compute(prepared, contacts: dict[str, list[tuple[int, int]]], fingers: list[
         for a, b in ivs:
             jobs.append((f, k, (a, b), (max(0, a - margin), min(T, b + margin))))
     total = sum((w1 - w0) * len(views) for *_, (w0, w1) in jobs)
-    bar = tqdm(total=total, unit="frame", desc="tactile flow", leave=False, disable=not progress or total == 0,
+    bar = progress_bar(total=total, unit="frame", desc="tactile flow", leave=False, disable=not progress or total == 0,
                dynamic_ncols=True)
     out, tasks = [], []
     for f, k, (a, b), (w0, w1) in jobs:

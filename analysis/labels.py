@@ -20,9 +20,11 @@ All indices are frame indices into the run's BioTac time axis; segments are ``[s
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from tactile_flow.validation import ConfigError, brief, suggest
 
 from . import segments as seg
 
@@ -44,6 +46,45 @@ class Segment:
 
     def frames(self) -> int:
         return self.stop - self.start
+
+
+#: the labels each scheme can produce
+SCHEME_LABELS = {SWEEP: ("approach", "before", "during", "after", "lift"), POUR: POUR_PHASES,
+                 GENERIC: ("approach", "contact", "no_contact", "all", "lift")}
+
+
+def check_labels(labels, key: str = "protocol.labels") -> None:
+    """Refuse declared ``labels`` that would silently change the analysis, before a run records:
+    a label one edit from a scheme's label (a misspelt ``durign`` selects the generic scheme:
+    no crossings, widths or directions), named with the nearest label; and a scheme's label
+    the labels do not select (``before`` without ``during`` selects the generic scheme, so it
+    would never appear). A label of one's own, like no scheme's, names a generic run
+    (``docs/protocols.md``, section 3). Raises :class:`validation.ConfigError` naming ``key[i]``."""
+    if labels is None:
+        return
+    if not isinstance(labels, (list, tuple)) or not all(isinstance(x, str) for x in labels):
+        raise ConfigError(key, f"got {brief(labels)}; expected a list of segment labels")
+    chosen = scheme(labels)
+    known = sorted({x for names in SCHEME_LABELS.values() for x in names})
+    for i, label in enumerate(labels):                 # a misspelt label first: it may be what changed the scheme
+        near = suggest(label, known) if label not in known else None
+        if near is not None:
+            owner = next(name for name, names in SCHEME_LABELS.items() if near in names)
+            raise ConfigError(f"{key}[{i}]", f"unknown label {label!r}, close to the {owner} scheme's `{near}`; "
+                                             f"expected a scheme's label, or one of your own unlike them (for the "
+                                             f"generic scheme); did you mean `{near}`?")
+    for i, label in enumerate(labels):
+        if label in SCHEME_LABELS[chosen] or label not in known:
+            continue
+        others = [name for name, names in SCHEME_LABELS.items() if label in names]
+        raise ConfigError(f"{key}[{i}]", f"{label!r} is a label of the {' and '.join(others)} scheme, but these labels "
+                                         f"select the {chosen} scheme ({_why(chosen)}), which produces only "
+                                         f"{', '.join(SCHEME_LABELS[chosen])}")
+
+
+def _why(chosen: str) -> str:
+    return {SWEEP: "they include during", POUR: "they include a pour phase",
+            GENERIC: "no during, no pour phase"}[chosen]
 
 
 def scheme(labels) -> str:
@@ -98,10 +139,14 @@ def generic_segments(finger: str, T: int, contacts, declared=()) -> list[Segment
 
 @dataclass
 class PourPhases:
-    """Onsets (frame indices, None if not found) and why a phase was not found."""
+    """Onsets (frame indices, None if not found); ``reasons``: why a phase that should be in the
+    record was not found (a skipped estimate); ``not_reached``: phases the run never got to (the
+    grasp held: a reactive pour tightened in time, or the record ends before the bottle fell),
+    which is a result, not something the analysis missed."""
 
     onsets: dict
     reasons: dict
+    not_reached: dict = field(default_factory=dict)
 
 
 def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | None, rotation_rad: float,
@@ -196,9 +241,10 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
         reasons["downward"] = "no sudden pressure fall (the grasp breaking away) nor pressure maximum before the full slip"
     onsets["downward"] = down
     onsets["full_slip"] = full if b < len(p) else None
+    not_reached = {}
     if onsets["full_slip"] is None:
-        reasons["full_slip"] = "the grasp holds until the record ends"
-    return PourPhases(onsets, reasons)
+        not_reached["full_slip"] = "the grasp holds until the record ends"
+    return PourPhases(onsets, reasons, not_reached)
 
 
 REACTED_FRAMES = 3     # frames after the reaction still searched for the initial slip's fall
@@ -212,12 +258,13 @@ def _reactive_phases(q, onsets, start, reaction, b, trough_prominence, distance,
     if slip is None:
         reasons["initial_slip"] = "no pressure trough between the pour start and the protocol's reaction"
     onsets["initial_slip"] = slip
-    why = f"not reached: the protocol reacted to the slip at {t[reaction]:.2f} s and the grasp held"
+    why = f"the protocol reacted to the slip at {t[reaction]:.2f} s and the grasp held"
+    not_reached = {}
     for name in ("rotation", "downward", "full_slip"):
         onsets[name] = None
-        reasons[name] = why
+        not_reached[name] = why
     onsets["held"] = reaction
-    return PourPhases(onsets, reasons)
+    return PourPhases(onsets, reasons, not_reached)
 
 
 def pour_segments(finger: str, T: int, phases: PourPhases, contact, contact_index: int, margin: int):

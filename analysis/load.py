@@ -131,11 +131,13 @@ IN_MEMORY_FRAMES = 10_000
 """Records of at most this many frames are read whole (``analysis.memory.chunk_frames``)."""
 
 
-def screen_frames(path, time, in_range, all_zero, pdc, stored_valid):
+def screen_frames(path, time, in_range, all_zero, pdc, stored_valid, all_saturated=None):
     """Check the time axis and each finger's samples; choose the frames to keep.
 
     ``in_range`` (T, F): the finger's 24 electrodes all within 1..4094 counts;
-    ``all_zero`` (T,): every electrode of every finger reads 0 (:func:`.electrodes.screen_counts`).
+    ``all_zero``, ``all_saturated`` (T,): every electrode of every finger reads 0, or the
+    saturated 4095 (:func:`.electrodes.screen_counts`). A record with no frame to keep is
+    refused naming why its frames were dropped (all zeros, saturation, out of range).
     Returns ``(keep (T,) bool, valid (T, F) bool, dropped)``: the frames kept, the validity
     of each finger's samples, and the list of what was dropped and why. A time axis that goes
     backwards at more than :data:`MAX_BACKWARD_FRACTION` of its steps (shuffled or
@@ -168,13 +170,18 @@ def screen_frames(path, time, in_range, all_zero, pdc, stored_valid):
     none = keep & ~valid.any(axis=1)
     if none.any():
         zeros = none & all_zero
+        saturated = none & (all_saturated if all_saturated is not None else False)
         why = ("every electrode of every finger reads 0 (a deleted or unreadable chunk read back as zeros)"
-               if zeros.sum() == none.sum() else "no finger has all 24 electrodes within 1..4094 counts")
+               if zeros.sum() == none.sum() else
+               "every electrode of every finger reads 4095: saturated (an impedance of 0 kΩ: pressed beyond the "
+               "sensor's range, or its channels shorted)" if saturated.sum() == none.sum() else
+               "no finger has all 24 electrodes within 1..4094 counts")
         dropped.append({"what": "frames", "frames": int(none.sum()), "reason": why})
         keep &= ~none
     if keep.sum() < 2:
-        raise AnalysisInputError(f"{path}: the run store holds {int(keep.sum())} valid tactile frame(s); "
-                                 f"nothing to analyse")
+        reasons = "; ".join(f"{d['frames']} frame(s) dropped: {d['reason']}" for d in dropped)
+        raise AnalysisInputError(f"{path}: the run store holds {int(keep.sum())} valid tactile frame(s)"
+                                 + (f" ({reasons})" if reasons else "") + "; nothing to analyse")
     return keep, valid[keep], dropped
 
 
@@ -212,8 +219,8 @@ def load_run(path, in_memory_frames: int = IN_MEMORY_FRAMES) -> RunData:
     baseline_counts = _values(b, "baseline", path) if "baseline" in b else None
     baseline_unc = _values(b, "baseline_uncertainty", path) if "baseline_uncertainty" in b else None
     stored_valid = _values(b, "valid", path, bool) if "valid" in b else np.ones(len(time), bool)
-    in_range, all_zero, electrodes_sha = screen_counts(stored)
-    keep, valid, dropped = screen_frames(path, time, in_range, all_zero, pdc, stored_valid)
+    in_range, all_zero, all_saturated, electrodes_sha = screen_counts(stored)
+    keep, valid, dropped = screen_frames(path, time, in_range, all_zero, pdc, stored_valid, all_saturated)
     del in_range, all_zero
     time = time[keep]
     pdc = pdc[keep] if pdc is not None else None

@@ -340,7 +340,7 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
     for t, name, _ in run.events.of_kind("reaction"):
         reaction = int(np.searchsorted(run.time, t))
         break
-    per_finger = {}
+    per_finger, not_reached = {}, {}
     for f, ivs in contacts.items():
         k = run.fingers.index(f)
         ci = int(np.argmax([b - a for a, b in ivs]))
@@ -366,11 +366,13 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
                              cfg.segmentation.plateau_level, fast=fast, reaction=reaction)
         for name, why in ph.reasons.items():
             skipped.append({"what": f"phase {name}", "finger": f, "reason": why})
+        if ph.not_reached:                        # a result (the grasp held), not a skipped estimate
+            not_reached[f] = dict(ph.not_reached)
         segments += labelling.pour_segments(f, len(run.time), ph, (a, b), ci, margin)
         per_finger[f] = {n: (float(run.time[i]) if i is not None else None) for n, i in ph.onsets.items()}
     overall = {}
     for n in labelling.POUR_PHASES:
         vals = [v[n] for v in per_finger.values() if v.get(n) is not None]
         overall[n] = float(np.median(vals)) if vals else None
-    return {"onsets": overall, "per_finger": per_finger,
+    return {"onsets": overall, "per_finger": per_finger, "not_reached": not_reached,
             "gravity_sensor": None if run.gravity_sensor() is None else run.gravity_sensor().tolist()}

@@ -377,6 +377,6 @@ def prepare(run: RunData, cfg, model, causal_proxy: bool = True) -> PreparedRun:
 
 def _progress(cfg, T: int, stretches_: int):
     """A progress bar over both passes of a record prepared in stretches (none for one piece)."""
-    from tqdm import tqdm
-    return tqdm(total=2 * T, unit="frame", desc="preprocessing", leave=False, dynamic_ncols=True,
+    from tactile_flow.cliapp.progress import progress_bar
+    return progress_bar(total=2 * T, unit="frame", desc="preprocessing", leave=False, dynamic_ncols=True,
                 disable=not cfg.progress or stretches_ == 1)

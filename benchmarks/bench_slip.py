@@ -250,8 +250,8 @@ def _live_arrays(live, sel):
 
 
 def _probe_live(live, sel, cfg, count_from=-np.inf) -> Probe:
-    from tactile_flow.protocols.live import live_settings
-    return probe_stream(*_live_arrays(live, sel), live_settings(cfg).slip, still=True, count_from=count_from)
+    from tactile_flow.protocols.settings import run_settings
+    return probe_stream(*_live_arrays(live, sel), run_settings(cfg).live.slip, still=True, count_from=count_from)
 
 
 def grip_cfg(seconds: float, seed: int, flexion: float):
@@ -268,7 +268,8 @@ def grip_cfg(seconds: float, seed: int, flexion: float):
 def rest_job(kind: str, seed: int, grip_seconds: float = 60.0, flexion: float = 1.1) -> dict:
     """A slip-free simulated run: gated counts from the live group, margins, and (sweeps)
     the ungated replay."""
-    from tactile_flow.protocols.live import live_settings, replay
+    from tactile_flow.protocols.live import replay
+    from tactile_flow.protocols.settings import run_settings
     from tactile_flow.protocols.plan import make_plan
     from tactile_flow.protocols.run import live_setup
     from tactile_flow.tactile import signals
@@ -278,7 +279,7 @@ def rest_job(kind: str, seed: int, grip_seconds: float = 60.0, flexion: float = 
         cfg = grip_cfg(grip_seconds, seed, flexion)
     else:
         cfg = compose(f"protocol={kind}", "live.enabled=true", f"hardware.seed={seed}", *QUIET)
-    slip_cfg = live_settings(cfg).slip
+    slip_cfg = run_settings(cfg).live.slip
     result, tree, tmp = run(cfg)
     with tmp:
         truth = truth_pour(tree)
@@ -345,7 +346,7 @@ def rest_bag() -> dict:
 
     rec, _ = select_fingers(read_bag(BAG))
     fingers = list(rec.fingers)
-    model = TactileModel.build(tactile_config({}, ["bottom", "left", "right"]))
+    model = TactileModel.build(tactile_config(None, ["bottom", "left", "right"]))
     rest = signals.baseline_from_rest(rec.electrodes, 0, 100)
     t = rec.device_time - rec.device_time[0]
     out = replay(model, rest, rec.seq, t, rec.electrodes, fingers)

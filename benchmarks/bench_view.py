@@ -145,7 +145,7 @@ def run_monitor(frames, fingers, views, with_viewer: bool, paced: bool, work: Pa
     from tactile_flow.protocols.live import LiveConfig, LiveMonitor, tactile_config, warm_up
     from tactile_flow.tactile.pipeline import TactileModel
     from tactile_flow.viewer.live import LiveViewer
-    model = TactileModel.build(tactile_config({}, views))
+    model = TactileModel.build(tactile_config(None, views))
     warm_up(model, views)
     sensors, clock = RecordedSensors(frames, fingers, 100.0), Clock()
     viewer = LiveViewer(fingers, views, model, work, spawn=False) if with_viewer else None

@@ -7,12 +7,15 @@ reaches the process that started the sweep. So every job writes ``job_result.jso
 own output directory (``hydra.runtime.output_dir``), atomically, twice::
 
     {"job": 3, "overrides": ["run=['a/run.zarr']"], "pid": 4711, "host": "node7", "code": null}  # started
-    {"job": 3, ..., "code": 2, "rows": [{"run": "a/run.zarr", "result": "error: ..."}]}            # ended
+    {"job": 3, ..., "code": 2, "rows": [{"run": "a/run.zarr", "result": "error: ..."}],
+     "error": "error: ..."}                                                                      # ended
 
 and the process that started the sweep reads them back when it ends (:class:`SweepResults`,
 ``on_multirun_end``): the sweep's exit status is the highest of its jobs' (3 interrupted,
-2 bad input, 1 failed, 0 done); a job that started and left no result (its process was killed,
-ran out of memory or crashed) counts as failed and is named in one line. When the launcher
+2 bad input, 1 failed, 0 done); every job that did not succeed is named in one line with its
+outcome and its error (:func:`failures`), and the sweep's count is of its jobs, not of the runs
+they left (:func:`counts`); a job that started and left no result (its process was killed, ran
+out of memory or crashed) counts as failed. When the launcher
 itself stops the sweep (a worker process died, Ctrl-C), :func:`run` still ends it that way,
 from the files there are. A single run (no ``-m``) keeps its result in this process.
 """
@@ -36,16 +39,27 @@ from tactile_flow.runstore.status import ExitCode
 from .runner import error_line, run_app, signals_received
 
 RESULT_FILE = "job_result.json"
+#: what a job's exit code says happened to it
+OUTCOMES = {ExitCode.OK: "succeeded", ExitCode.FAILED: "failed", ExitCode.BAD_INPUT: "refused (bad input)",
+            ExitCode.INTERRUPTED: "aborted"}
 _process = {"code": 0}                  # a single run's exit code; at the end of a sweep, the sweep's
 _open_sweep: dict = {}                  # the config of a sweep that started here and has not ended
+_job_error: dict = {}                   # the error line the running job printed (note_error)
+
+
+def note_error(line: str) -> None:
+    """The one line the running job printed for its error, kept with its result."""
+    _job_error["line"] = line
 
 
 def record(code: int, rows: list[dict] = ()) -> None:
-    """The job's exit code and its rows for the sweep's table: in the job's output directory
-    with ``-m``; a single run's code is kept in this process (what :func:`run` returns)."""
+    """The job's exit code, its rows for the sweep's table and the error it noted
+    (:func:`note_error`): in the job's output directory with ``-m``; a single run's code is
+    kept in this process (what :func:`run` returns)."""
     hc = HydraConfig.get()
+    error = _job_error.pop("line", None)
     if hc.mode == RunMode.MULTIRUN:
-        _write(Path(hc.runtime.output_dir), {**_job(hc), "code": int(code), "rows": list(rows)})
+        _write(Path(hc.runtime.output_dir), {**_job(hc), "code": int(code), "rows": list(rows), "error": error})
     else:
         _process["code"] = max(_process["code"], int(code))
 
@@ -76,6 +90,34 @@ def describe(result: dict) -> str:
     return f"job {result['job']}" + (f" ({overrides})" if overrides else "")
 
 
+def outcome(result: dict) -> str:
+    """What happened to a job, in a word or two (a job without a result: failed)."""
+    return OUTCOMES.get(result["code"], f"exit {result['code']}") if result["code"] is not None else "failed"
+
+
+def failures(results: list[dict]) -> list[str]:
+    """One line per job that did not succeed: ``job 1 (overrides): refused (bad input): <its error>``."""
+    lines = []
+    for r in results:
+        if r["code"] is None:
+            where = f" (pid {r['pid']} on {r.get('host')})" if r.get("pid") else ""
+            lines.append(f"{describe(r)}: no result: its process{where} ended before the job did (killed, out "
+                         f"of memory or crashed); counted as failed")
+        elif r["code"] != ExitCode.OK:
+            error = r.get("error")
+            lines.append(f"{describe(r)}: {outcome(r)}" + (f": {error}" if error else ""))
+    return lines
+
+
+def counts(results: list[dict]) -> str:
+    """``3 jobs: 2 succeeded, 1 refused (bad input)``: every job of the sweep, by outcome."""
+    tally: dict[str, int] = {}
+    for r in results:
+        tally[outcome(r)] = tally.get(outcome(r), 0) + 1
+    parts = [f"{n} {word}" for word, n in sorted(tally.items(), key=lambda kv: kv[0] != "succeeded")]
+    return f"{len(results)} job{'s' if len(results) != 1 else ''}" + (": " + ", ".join(parts) if parts else "")
+
+
 class SweepResults(Callback):
     """The results of a sweep's jobs, read from disk in the process that started it.
     A CLI's callback derives from it and draws its table in :meth:`summarise`."""
@@ -93,11 +135,8 @@ class SweepResults(Callback):
     def on_multirun_end(self, config, **kwargs) -> None:
         _open_sweep.pop("config", None)
         results = collect(Path(config.hydra.sweep.dir))
-        for r in results:
-            if r["code"] is None:
-                where = f" (pid {r['pid']} on {r.get('host')})" if r.get("pid") else ""
-                print(f"{describe(r)}: no result: its process{where} ended before the job did (killed, out "
-                      f"of memory or crashed); counted as failed", file=sys.stderr)
+        for line in failures(results):
+            print(line, file=sys.stderr)
         self.summarise(config, results)
         _process["code"] = max(_process["code"], sweep_code(results))
 

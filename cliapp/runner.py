@@ -24,10 +24,12 @@ import sys
 import threading
 import traceback
 
-from tactile_flow.runstore.status import ExitCode
-from tactile_flow.validation import suggest, unknown_key
+from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException, ValidationError
 
-from .config_guard import install
+from tactile_flow.runstore.status import ExitCode
+from tactile_flow.validation import ConfigError, suggest, unknown_key
+
+from .config_guard import install, origin
 from .startup import end_at_once
 
 BAD_INPUT, INTERRUPTED = ExitCode.BAD_INPUT, ExitCode.INTERRUPTED
@@ -127,22 +129,32 @@ def _unraisable(before):
     return hook
 
 
-def report(exc: BaseException, what: str, verbose: bool = False) -> None:
-    """An error on stderr as one line, ``what: message`` (the traceback before it with ``verbose``)."""
+def report(exc: BaseException, what: str, verbose: bool = False) -> str:
+    """An error on stderr as one line, ``what: message`` (the traceback before it with
+    ``verbose``); returns the line."""
     if verbose:
         traceback.print_exception(exc)
-    print(f"{what}: {exc}", file=sys.stderr)
+    located = as_config_error(exc) is not None          # a config key: with the file and line it came from
+    line = f"{what}: {error_line(exc) if located else exc}"
+    print(line, file=sys.stderr)
+    return line
+
+
+#: omegaconf's names of the types a value could not be converted to, as our messages say them
+_EXPECTED = {"Float": "a number", "Integer": "a whole number", "Boolean": "true or false", "String": "a string"}
 
 
 def error_line(exc: BaseException, step_fields=None) -> str:
-    """An exception and its cause as one line (Hydra's messages span several). An override
-    of a key that does not exist is named with the nearest known key, in place of Hydra's
-    hint to add it with ``+`` (which :func:`protocols.schema.check_config` would refuse)."""
-    cause = exc.__cause__
-    if "Could not override" in str(exc) and getattr(cause, "parent_node", None) is not None \
-            and isinstance(getattr(cause, "key", None), str) and getattr(cause, "full_key", None):
-        parent = cause.full_key[:-len(cause.key)].rstrip(".")
-        return str(unknown_key(parent, cause.key, _known_keys(parent, cause.parent_node.keys(), step_fields)))
+    """An exception and its cause as one line (Hydra's messages span several). An error about
+    a config key is ``key: what was wrong; what was expected``, the same whether Hydra refused
+    it while composing or the run's checks did, and whether the key came from the command
+    line or from a file; one written in a data file is prefixed with the file and the line
+    (:func:`cliapp.config_guard.origin`). An unknown key is named with the nearest known key,
+    in place of Hydra's hint to add it with ``+`` (which the run's checks would refuse)."""
+    config_error = as_config_error(exc, step_fields)
+    if config_error is not None:
+        where = origin(config_error.key)
+        return (f"{where[0]} line {where[1]}: " if where else "") + str(config_error)
     missing = re.search(r"Could not find '([\w/]+)/([^']+)'", str(exc))
     if missing:                                   # a group option that does not exist
         group, name = missing.groups()
@@ -153,9 +165,48 @@ def error_line(exc: BaseException, step_fields=None) -> str:
                 + (f"; expected one of {', '.join(options)}" if options else "")
                 + (f"; did you mean `{near}`?" if near else ""))
     parts = [str(exc)]
-    if exc.__cause__ is not None and str(exc.__cause__) not in parts[0]:
-        parts.append(str(exc.__cause__))
+    cause = exc.__cause__
+    if cause is not None and str(cause) not in parts[0] and type(cause).__name__ != "_RemoteTraceback":
+        parts.append(str(cause))                     # (a worker process's traceback is not a message)
     return "; ".join(line.strip() for part in parts for line in part.splitlines() if line.strip())
+
+
+def as_config_error(exc: BaseException, step_fields=None) -> ConfigError | None:
+    """``exc`` as a :class:`validation.ConfigError` naming the key, if it is one or Hydra's or
+    omegaconf's refusal of a key (an unknown key, a value of the wrong type), else None."""
+    if isinstance(exc, ConfigError):
+        return exc
+    cause = _omegaconf_cause(exc)
+    if cause is None or not isinstance(getattr(cause, "full_key", None), str) or not cause.full_key:
+        return None
+    full_key = cause.full_key
+    if isinstance(cause, (ConfigKeyError, ConfigAttributeError)) and isinstance(cause.key, str) \
+            and cause.parent_node is not None:
+        parent = full_key[:-len(cause.key)].rstrip(".")
+        known = _known_keys(parent, cause.parent_node.keys(), step_fields)
+        if parent == "hydra.launcher" and known == ["_target_"]:
+            return ConfigError(full_key, "Hydra's default launcher runs the jobs one after another and has no "
+                                         "settings; for jobs in parallel add hydra/launcher=joblib (simulated lab "
+                                         "only)")
+        return unknown_key(parent, cause.key, known)
+    converted = re.search(r"Value '(.*)' of type '\w+' could not be converted to (\w+)", str(cause.msg or ""))
+    if converted:
+        expected = _EXPECTED.get(converted.group(2), converted.group(2))
+        return ConfigError(full_key, f"got {converted.group(1)!r}; expected {expected}")
+    if isinstance(cause, ValidationError):
+        return ConfigError(full_key, " ".join(str(cause.msg or cause).split()))
+    return None
+
+
+def _omegaconf_cause(exc: BaseException):
+    """The first omegaconf error in ``exc``'s chain of causes and contexts (Hydra wraps them)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, OmegaConfBaseException):
+            return exc
+        exc = exc.__cause__ or exc.__context__
+    return None
 
 
 def _known_keys(parent: str, composed, step_fields=None) -> list[str]:

@@ -31,6 +31,36 @@ def end_at_once_on_signals() -> None:
             signal.signal(s, end_at_once)
 
 
+def interrupts_raise() -> None:
+    """From here on SIGINT and SIGTERM raise ``KeyboardInterrupt`` (once the command has loaded
+    what it needs and can clean up after itself and say ``interrupted``); an ignored signal stays
+    ignored."""
+    for s in (signal.SIGINT, signal.SIGTERM):
+        if signal.getsignal(s) != signal.SIG_IGN:
+            signal.signal(s, _raise_interrupt)
+
+
+def _raise_interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+def tactile_demo() -> None:
+    """The ``tactile-demo`` entry point (``tactile`` imports nothing of the project): signals end
+    it at once while numpy and numba load, then interrupt it with one line and exit status 3
+    (its figure is written whole or not at all)."""
+    end_at_once_on_signals()
+    import sys
+
+    from tactile_flow.tactile.demo import main
+    interrupts_raise()
+    try:
+        code = main()
+    except KeyboardInterrupt:
+        os.write(2, b"interrupted\n")
+        code = INTERRUPTED
+    sys.exit(code)
+
+
 def tactile_recover() -> None:
     """The ``tactile-recover`` entry point (here: its module, in ``runstore``, stands below
     ``cliapp`` and may not import this one): signals end it at once until it has loaded

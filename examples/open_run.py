@@ -79,8 +79,9 @@ def segment_table(analysis: xr.DataTree) -> list[dict]:
                "slip_class": None, "displacement": None, "direction": None}
         if slip is not None and i in slip["segment"].values:
             e = slip.sel(segment=i)
+            direction = float(e["slip_direction_sensor"].values)      # NaN for a touch or a turn: no direction
             row.update(slip_class=str(e["slip_class"].values), displacement=float(e["slip_displacement"].values),
-                       direction=float(e["slip_direction_sensor"].values))
+                       direction=direction if np.isfinite(direction) else None)
         rows.append(row)
     return rows
 
@@ -128,8 +129,13 @@ def main(argv=None) -> int:
         print(f"step {name}: {start:.3f}-{end:.3f} s")
     rows = segment_table(analysis)
     for r in rows:
-        slip = "" if r["slip_class"] is None else (f" slip {r['slip_class']} {r['displacement']:.4f} mm "
-                                                   f"{r['direction']:.2f} deg")
+        heading = "no direction" if r["direction"] is None else f"{r['direction']:.2f} deg"
+        if r["slip_class"] is None:
+            slip = ""
+        elif not r["slip_class"]:                   # too short or unusable: summary.json says why
+            slip = " slip undecided"
+        else:
+            slip = f" slip {r['slip_class']} {r['displacement']:.4f} mm {heading}"
         print(f"segment {r['id']} {r['finger']} {r['label']}: {r['start']:.4f}-{r['end']:.4f} s{slip}")
     t, p = pressure(run, finger)
     out = args.out or Path("open_run.png")

@@ -180,6 +180,12 @@ class TactileSensors(Device):
         first). The run engine watches contact criteria with it while the recorder alone
         drains :meth:`read`."""
 
+    @property
+    def malformed(self) -> int:
+        """Frames this driver received and refused so far (:mod:`hardware.wire`); 0 for a source
+        that cannot receive a malformed one."""
+        return 0
+
     def tap(self, maxlen: int = 1000) -> FrameTap:
         """A copy of every frame received from now on, for a consumer other than the
         recorder (the live tactile-flow monitor): :meth:`read` still gets every frame.

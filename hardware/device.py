@@ -163,6 +163,17 @@ class Device(ABC):
     def identity(self) -> DeviceIdentity:
         """Model, serial number or address, firmware of the device."""
 
+    def check_link(self) -> None:
+        """Raise the device's typed error (:class:`~hardware.errors.DeviceError`) if its link is
+        down now: lost (a closed socket, a vanished port, a killed bridge) or silent longer than
+        its stale timeout. Cheap and non-blocking: the run engine asks every device every period
+        (the link interlock, :mod:`protocols.interlocks`). By default nothing to check."""
+
+    def wire_report(self) -> dict | None:
+        """What the driver refused on the wire (:class:`hardware.wire.WireRejects`, as a dict),
+        or None for a device that has nothing to report."""
+        return None
+
     def _require_connected(self) -> None:
         if not self.is_connected:
             raise NotConnectedError(f"{self.kind}: not connected (call connect() first)")

@@ -298,6 +298,22 @@ class SerialBiotacs(TactileSensors):
         self._check_alive()
         return self._latest
 
+    def check_link(self) -> None:
+        self._check_alive()
+
+    def wire_report(self) -> dict:
+        """Frames refused on the wire: failed CRC, cut short, or lacking a configured finger."""
+        st = self.parser.stats
+        reasons = {"crc failed": st.corrupt, "truncated": st.truncated, "fingers missing": self.mismatched}
+        reasons = {k: v for k, v in reasons.items() if v}
+        return {"refused": sum(reasons.values()), "reasons": reasons, "last": None,
+                "garbage_bytes": st.garbage_bytes}
+
+    @property
+    def malformed(self) -> int:
+        """Frames refused so far (CRC, truncation, fingers missing)."""
+        return self.parser.stats.corrupt + self.parser.stats.truncated + self.mismatched
+
     # -- internals -----------------------------------------------------------------
     def _await_first_frame(self) -> None:
         if not self._first.wait(self.cfg.first_frame_timeout_s):

@@ -138,6 +138,8 @@ class SerialPump(Pump):
         self._firmware = "?"
         self.done_count = 0                            # ``*DONE`` messages seen (volume dispensed)
         self.poll_errors = 0
+        self._last_poll_error: str | None = None
+        self._last_status: float | None = None         # host time of the last status reply
 
     @property
     def identity(self) -> DeviceIdentity:
@@ -163,6 +165,7 @@ class SerialPump(Pump):
             self.close()
             raise
         self._stop.clear()
+        self._last_status = self.clock.now()
         self._poller = threading.Thread(target=self._poll_loop, name="pump-poll", daemon=True)
         self._poller.start()
 
@@ -207,6 +210,20 @@ class SerialPump(Pump):
     def read_states(self) -> list[PumpState]:
         self._require_alive()
         return self._buffer.drain()
+
+    def check_link(self) -> None:
+        """A lost port, or (while polling) no status reply for ``timeout_s`` + two poll periods:
+        a pump that stopped answering may still be pumping."""
+        self._require_alive()
+        last, limit = self._last_status, self.cfg.timeout_s + 2.0 / self.cfg.poll_hz
+        if self._poller is not None and last is not None and self.clock.now() - last > limit:
+            raise DeviceTimeoutError(f"{self.kind}: no status reply on {self.cfg.port} for "
+                                     f"{self.clock.now() - last:.2f} s (> {self.cfg.key}.timeout_s + 2 poll periods "
+                                     f"= {limit:g} s)")
+
+    def wire_report(self) -> dict:
+        return {"refused": self.poll_errors, "reasons": {"status poll failed": self.poll_errors} if self.poll_errors
+                else {}, "last": self._last_poll_error}
 
     # -- internals -----------------------------------------------------------------
     def _check_rate(self, rate, name: str) -> float:
@@ -259,9 +276,11 @@ class SerialPump(Pump):
                 state = self.status()
             except (DeviceDisconnectedError, NotConnectedError):
                 return
-            except Exception:  # one missed sample; the recorder sees the gap
+            except Exception as exc:  # one missed sample; the recorder sees the gap
                 self.poll_errors += 1
+                self._last_poll_error = f"{type(exc).__name__}: {exc}"
                 continue
+            self._last_status = state.host_time
             self._buffer.put(state)
 
 
@@ -314,6 +333,7 @@ class SerialScale(Scale):
         self._ack = threading.Event()
         self.overloaded = False
         self.unparsed = 0                             # lines that were neither a reading nor an ACK
+        self._last_unparsed: str | None = None
 
     @property
     def identity(self) -> DeviceIdentity:
@@ -370,6 +390,13 @@ class SerialScale(Scale):
         self._require_alive()
         return self._buffer.drain()
 
+    def check_link(self) -> None:
+        self._require_alive()
+
+    def wire_report(self) -> dict:
+        return {"refused": self.unparsed, "reasons": {"not a weight line": self.unparsed} if self.unparsed else {},
+                "last": self._last_unparsed}
+
     # -- internals -----------------------------------------------------------------
     def _require_alive(self) -> None:
         if self._port is None:
@@ -389,6 +416,7 @@ class SerialScale(Scale):
         reading = parse_weight_line(line, host_time)
         if reading is None:
             self.unparsed += 1
+            self._last_unparsed = f"scale: {line[:40]!r} is not a weight line"
             return
         self.overloaded = line.startswith("OL")
         if self.overloaded:

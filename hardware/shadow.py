@@ -29,6 +29,7 @@ from .errors import (BUFFER_RANGE_S, RATE_RANGE_HZ, ConfigError, DeviceDisconnec
                      DeviceTimeoutError, NotConnectedError, SafetyError, require_positive, require_within)
 from .hand import JOINT_INDEX, JOINT_NAMES, Hand, HandState, check_joint_names
 from .rosbridge import RosbridgeConfig, RosbridgeConnection
+from .wire import WireError, WireRejects, _brief, counts
 
 log = logging.getLogger(__name__)
 
@@ -158,10 +159,18 @@ class ShadowHand(_RosbridgeDevice, Hand):
         self._target = np.full(len(JOINT_NAMES), np.nan)
         self._command = None
         self._seq = 0
+        self.rejects = WireRejects()
+        """Joint states refused as malformed (:mod:`hardware.wire`)."""
 
     @property
     def identity(self) -> DeviceIdentity:
         return DeviceIdentity(self.model, f"{self.rb_cfg.url}{self.cfg.command_topic}", "ROS (rosbridge v2)")
+
+    def check_link(self) -> None:
+        self._check_alive(self._states, self.cfg.state_topic)
+
+    def wire_report(self) -> dict:
+        return self.rejects.as_dict()
 
     def connect(self) -> None:
         """Open rosbridge, subscribe to joint states, advertise the command topic; wait for a state."""
@@ -243,16 +252,37 @@ class ShadowHand(_RosbridgeDevice, Hand):
                                          f"({self.cfg.key}.arrival_tolerance_rad={self.cfg.arrival_tolerance_rad})")
             self.clock.sleep(0.01)
 
-    def _on_state(self, msg: dict) -> None:
+    def _on_state(self, msg) -> None:
         host = self.clock.now()
-        pos = self._position.copy()
-        for name, q in zip(msg.get("name", ()), msg.get("position", ())):
-            i = JOINT_INDEX.get(name)
-            if i is not None:
-                pos[i] = q
+        try:
+            pos, stamp = self._decode_state(msg)
+        except WireError as exc:                  # refused, counted, the stream goes on (hardware.wire)
+            self.rejects.add(exc)
+            return
         self._position = pos
-        stamp = stamp_seconds(msg.get("header", {}).get("stamp", {}))
         self._states.push(HandState(host, stamp, pos, self._target.copy()), host)
+
+    def _decode_state(self, msg) -> tuple[np.ndarray, float]:
+        """A ``JointState`` → (joint positions (rad) with this message's joints updated, stamp s)."""
+        names = msg.get("name") if isinstance(msg, dict) else None
+        values = msg.get("position") if isinstance(msg, dict) else None
+        if not isinstance(names, list) or not isinstance(values, list) or len(names) != len(values):
+            raise WireError("joint state: not names and positions of one length",
+                            f"joint state: name {_brief(names)}, position {_brief(values)}")
+        pos = self._position.copy()
+        for name, q in zip(names, values):
+            i = JOINT_INDEX.get(name) if isinstance(name, str) else None
+            if i is None:
+                continue
+            if isinstance(q, bool) or not isinstance(q, (int, float)) or not math.isfinite(q):
+                raise WireError("joint state: position not a finite number", f"{name}: got {_brief(q)} rad")
+            pos[i] = q
+        header = msg.get("header") if isinstance(msg.get("header"), dict) else {}
+        try:
+            stamp = stamp_seconds(header.get("stamp") if isinstance(header.get("stamp"), dict) else {})
+        except (TypeError, ValueError):
+            raise WireError("header: not a stamp", f"header: got {_brief(header)}") from None
+        return pos, stamp
 
 
 # ============================================================================ BioTacs
@@ -296,7 +326,8 @@ class RosbridgeBiotacs(_RosbridgeDevice, TactileSensors):
         self._count = 0
         self.unconnected: set[str] = set()
         """Fingers seen reading ``pdc = -22072`` (no sensor) in any frame so far."""
-        self.malformed = 0
+        self.rejects = WireRejects()
+        """Messages refused as malformed (:mod:`hardware.wire`)."""
 
     @property
     def fingers(self) -> tuple[str, ...]:
@@ -335,6 +366,17 @@ class RosbridgeBiotacs(_RosbridgeDevice, TactileSensors):
         self._check_alive(self._frames, self.cfg.topic)
         return self._frames.latest
 
+    def check_link(self) -> None:
+        self._check_alive(self._frames, self.cfg.topic)
+
+    def wire_report(self) -> dict:
+        return self.rejects.as_dict()
+
+    @property
+    def malformed(self) -> int:
+        """Messages refused so far (``rejects.total``)."""
+        return self.rejects.total
+
     # -- internals -----------------------------------------------------------------
     def _check_fingers(self) -> None:
         asked = [f for f in self.cfg.fingers if f in self.unconnected]
@@ -350,31 +392,51 @@ class RosbridgeBiotacs(_RosbridgeDevice, TactileSensors):
         host = self.clock.now()
         try:
             frame = self._decode(msg, host)
-        except (KeyError, IndexError, TypeError, ValueError):
-            self.malformed += 1
+        except WireError as exc:                  # refused, counted, the stream goes on (hardware.wire)
+            self.rejects.add(exc)
             return
         self._frames.push(frame, host)
         self._publish(frame)
 
-    def _decode(self, msg: dict, host: float) -> BiotacFrame:
-        tactiles = msg["tactiles"]
+    def _decode(self, msg, host: float) -> BiotacFrame:
+        """A ``BiotacAll`` message → a frame of the configured fingers; :class:`WireError` for a
+        message that is not one (a field missing or of the wrong type, a count that does not fit
+        16 bits). Counts outside 0..4095 that fit are kept: the frame is then invalid."""
+        tactiles = msg.get("tactiles") if isinstance(msg, dict) else None
+        if not isinstance(tactiles, list) or len(tactiles) <= max(self._rows):
+            raise WireError("tactiles: not a list of the fingers' readings",
+                            f"tactiles: got {_brief(tactiles)}; expected a list of {len(FINGERS)} Biotac readings")
         for i, t in enumerate(tactiles[:len(FINGERS)]):
-            if t["pdc"] == UNCONNECTED_PDC:
+            if isinstance(t, dict) and t.get("pdc") == UNCONNECTED_PDC:
                 self.unconnected.add(FINGERS[i])
-        rows = [tactiles[r] for r in self._rows]
-        F = len(rows)
+        F = len(self._rows)
         electrodes = np.zeros((F, N_TAXELS), np.int16)
-        for k, t in enumerate(rows):
-            e = t.get("electrodes") or []
-            electrodes[k, :min(len(e), N_TAXELS)] = e[:N_TAXELS]
-        pac_lists = [t.get("pac") or [t["pac0"], t["pac1"]] for t in rows]
-        n_pac = min(len(p) for p in pac_lists)
-        header = msg.get("header", {})
+        channels = {name: np.zeros(F, np.int32) for name in ("pdc", "tdc", "tac")}
+        pacs = []
+        for k, r in enumerate(self._rows):
+            t, who = tactiles[r], FINGERS[r]
+            if not isinstance(t, dict):
+                raise WireError("tactiles: a reading is not a mapping", f"tactiles[{r}] ({who}): got {_brief(t)}")
+            e = counts(t.get("electrodes") or [], f"{who} electrodes")
+            if e.ndim != 1 or len(e) > N_TAXELS:
+                raise WireError("electrodes: not a list of counts",
+                                f"{who} electrodes: got {len(e)} values; expected {N_TAXELS}")
+            electrodes[k, :len(e)] = e
+            for name in channels:
+                if name not in t:
+                    raise WireError(f"{name}: missing", f"{who}: no {name}")
+                channels[name][k] = counts(t[name], f"{who} {name}")
+            pac = t.get("pac") or [t.get("pac0"), t.get("pac1")]
+            pacs.append(counts(pac, f"{who} pac"))
+        n_pac = min(len(p) for p in pacs)
+        header = msg.get("header") if isinstance(msg.get("header"), dict) else {}
+        stamp = header.get("stamp") if isinstance(header.get("stamp"), dict) else {}
+        seq = header.get("seq", self._count + 1)
+        try:
+            device_time, seq = stamp_seconds(stamp), int(seq)
+        except (TypeError, ValueError):
+            raise WireError("header: not a stamp and a sequence number", f"header: got {_brief(header)}") from None
         self._count += 1
-        return BiotacFrame(seq=int(header.get("seq", self._count)),
-                           device_time=stamp_seconds(header.get("stamp", {})), host_time=host,
-                           electrodes=electrodes,
-                           pdc=np.array([t["pdc"] for t in rows], np.int32),
-                           tdc=np.array([t["tdc"] for t in rows], np.int32),
-                           tac=np.array([t["tac"] for t in rows], np.int32),
-                           pac=np.array([p[:n_pac] for p in pac_lists], np.int16))
+        return BiotacFrame(seq=seq, device_time=device_time, host_time=host, electrodes=electrodes,
+                           pdc=channels["pdc"], tdc=channels["tdc"], tac=channels["tac"],
+                           pac=np.array([p[:n_pac] for p in pacs], np.int16))

@@ -19,6 +19,8 @@ from typing import Optional
 
 import numpy as np
 
+from tactile_flow.validation import spec
+
 from .errors import ConfigError
 
 KINDS = ("straws", "sticks", "flat", "bump")
@@ -39,6 +41,9 @@ class SurfaceConfig:
     width_mm: Optional[float] = 10.0      # sticks
     height_mm: Optional[float] = 2.0      # sticks, bump
     radius_mm: Optional[float] = 8.0      # bump footprint radius
+    sweep_depth_mm: float = spec(1.5, gt=0)   # how deep a sweep presses the pad below the features' top: a
+                                          # board's own (a flat stick top saturates the electrodes at a depth
+                                          # a round straw does not); the shipped sweeps take it from here
 
 
 @dataclass(frozen=True)

@@ -275,6 +275,10 @@ class UR10Arm(Arm):
             self.faults.append(f"{why}: stop failed: {exc}")
 
     # ------------------------------------------------------------------ state
+    def check_link(self) -> None:
+        """The RTDE stream's verdict (a closed connection, no new sample for ``stale_timeout_s``)."""
+        self._require_link()
+
     def _require_link(self) -> None:
         if self._lost is not None:
             raise DeviceDisconnectedError(self._lost)

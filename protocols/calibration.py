@@ -32,12 +32,13 @@ KEY = "hardware.biotac_calibration"
 
 
 def session_baseline(hw, lab) -> Baseline | None:
-    """The calibration ``hw.biotac_calibration`` names for ``lab``'s fingers, or ``None``.
+    """The calibration ``hw.biotac_calibration`` names for ``lab``'s fingers, or ``None``;
+    ``hw``: the typed hardware config (:class:`~protocols.settings.RunSettings` ``.hardware``).
 
     Raises :class:`~hardware.errors.ConfigError` naming the key for a missing or bad file, or
     ``simulated`` on a lab that does not simulate its sensors.
     """
-    what = hw.get("biotac_calibration")
+    what = hw.biotac_calibration
     fingers = list(lab.biotac.fingers)
     if what is None:
         return None
@@ -46,9 +47,9 @@ def session_baseline(hw, lab) -> Baseline | None:
         if counts is None:
             raise ConfigError(KEY, "'simulated' is only for hardware=sim; give the lab's calibration JSON file "
                                    "(or null)")
-        sensor = hw.get("sensor") or {}
-        details = {"rest_s": sensor.get("calibration_rest_s"), "drift_counts": sensor.get("calibration_drift_counts"),
-                   "common_drift_counts": sensor.get("calibration_common_drift_counts"), "seed": hw.get("seed")}
+        sensor = hw.sensor                        # the simulator's sensor model (hardware.config.SensorModelConfig)
+        details = {"rest_s": sensor.calibration_rest_s, "drift_counts": sensor.calibration_drift_counts,
+                   "common_drift_counts": sensor.calibration_common_drift_counts, "seed": hw.seed}
         cals = {f: SensorCalibration(np.clip(counts[f], 1, 4095), f"sim-{f}", "simulated session calibration")
                 for f in fingers}
         return Baseline("simulated_calibration", cals,

@@ -30,7 +30,7 @@ from tactile_flow.conf import DIR as CONF_DIR
 from tactile_flow.runstore import RunStatus, analyses, files, paths, rundir, runinfo
 
 from .interrupts import Interrupts
-from .schema import check_targets, register
+from .schema import register
 
 log = logging.getLogger("tactile-run")
 EXIT_CODES = {s.value: int(s.exit_code) for s in RunStatus}
@@ -73,20 +73,22 @@ def run_job(cfg, console=console, interrupts: Interrupts | None = None) -> int:
 def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
     from . import resume  # the run store, the simulator, numba: not for --help
     from .run import RunResult, hand_off, run_protocol
+    from .settings import run_settings
+    verbose = cfg.get("verbose") is True
     try:
-        check_run_dir(cfg, hc, run_dir)
-        check_targets(cfg)
-        _refuse_parallel_hardware(cfg, hc)
+        settings = run_settings(cfg)                # the one check of the whole config: typed from here on
+        verbose = settings.verbose
+        check_run_dir(settings, hc, run_dir)
+        _refuse_parallel_hardware(settings, hc)
         decision = "run"
-        if cfg.resume and not cfg.plan_only:
-            config_yaml = OmegaConf.to_yaml(cfg, resolve=True)
+        if settings.resume and not settings.plan_only:
             if hc.mode == RunMode.MULTIRUN:
-                resume.check_job_siblings(hc.sweep.dir, hc.job.num, run_dir, config_yaml)
+                resume.check_job_siblings(hc.sweep.dir, hc.job.num, run_dir, settings.config_yaml)
             with interrupts.during("writing"):        # an earlier attempt may be moved aside
-                decision = resume.decide(run_dir, config_yaml, analyze=cfg.analyze)
-        if decision == "run" and not cfg.plan_only:
+                decision = resume.decide(run_dir, settings.config_yaml, analyze=settings.analyze)
+        if decision == "run" and not settings.plan_only:
             with interrupts.during("writing"):
-                record_config(run_dir, cfg)
+                record_config(run_dir, cfg)           # Hydra's record: the composed config as Hydra gave it
             log.info("tactile-run %s", " ".join(hc.overrides.task))     # the log's first line (opens it)
         if decision == "skip":
             console(f"run {run_dir}: skipped (succeeded before with the same config and code)")
@@ -96,30 +98,30 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
                     f"or incomplete: analysing it again")
             result = RunResult("success", run_dir, None, run_dir / "run.zarr")
         else:
-            result = run_protocol(cfg, run_dir, overrides=list(hc.overrides.task), console=console,
+            result = run_protocol(settings, run_dir, overrides=list(hc.overrides.task), console=console,
                                   interrupts=interrupts)
         interrupts.phase = "writing"                  # the run is recorded: a signal now skips the analysis
     except ValueError as exc:                       # ProtocolError, ConfigError, RunDirBusy: bad input
-        _report(cfg, exc, "error")
+        _report(verbose, exc, "error")
         return BAD_INPUT
     except Exception as exc:
-        _report(cfg, exc, "run failed")
+        _report(verbose, exc, "run failed")
         return EXIT_CODES["failed"]
     if result.status == "planned":
         return 0
     detail = f" ({result.error})" if result.error else ""
     code = EXIT_CODES.get(result.status, 1)
-    if cfg.analyze and interrupts.count and result.status != "failed":
+    if settings.analyze and interrupts.count and result.status != "failed":
         console(f"run {run_dir}: {result.status}{detail}; not analysed (stopped by the operator): "
                 f"`tactile-analyze run={result.store}`")
         return EXIT_CODES["aborted"]               # interrupted, as a Ctrl-C a moment later in the analysis
-    if cfg.analyze and result.status in ("success", "aborted"):
+    if settings.analyze and result.status in ("success", "aborted"):
         try:
             with interrupts.during("analysis"):
-                hand_off(result, cfg.analysis, console=console)
+                hand_off(result, settings.analysis, console=console)
         except (Exception, KeyboardInterrupt) as exc:
             if isinstance(exc, Exception) and not interrupts.count:     # the recording is safe: say what went wrong
-                _report(cfg, exc, "analysis failed")
+                _report(verbose, exc, "analysis failed")
                 console(f"run {run_dir}: {result.status}{detail}, recorded; analysis failed ({type(exc).__name__}); "
                         f"analyse it again with `tactile-analyze run={result.store}`")
                 return code or EXIT_CODES["failed"]
@@ -128,17 +130,20 @@ def _job(cfg, hc, run_dir: Path, interrupts: Interrupts, console) -> int:
                     f"analyse it with `tactile-analyze run={result.store}`")
             return EXIT_CODES["aborted"]
     console(f"run {run_dir}: {result.status}{detail}")
+    if code:
+        jobresults.note_error(f"run {run_dir}: {result.status}{detail}")
     return code
 
 
-def check_run_dir(cfg, hc, run_dir: Path) -> None:
+def check_run_dir(settings, hc, run_dir: Path) -> None:
     """Before anything is written in ``run_dir``: the protocol's name is a plain name, a sweep's
     job directory is inside the sweep directory (:mod:`runstore.paths`), and, unless resuming,
-    the directory holds no run (a finished run's record is never rewritten). ``ValueError``."""
-    paths.component(cfg.protocol.name, "protocol.name")
+    the directory holds no run (a finished run's record is never rewritten). ``ValueError``.
+    ``settings``: the run's :class:`~protocols.settings.RunSettings`."""
+    paths.component(settings.protocol.name, "protocol.name")
     if hc.mode == RunMode.MULTIRUN:
         paths.within(hc.sweep.dir, run_dir, "hydra.sweep.subdir")
-    if not cfg.resume:
+    if not settings.resume:
         rundir.refuse_finished(run_dir)
 
 
@@ -153,17 +158,17 @@ def record_config(run_dir: Path, cfg) -> None:
         files.write_text(run_dir, f".hydra/{name}", OmegaConf.to_yaml(node), record=True)
 
 
-def _report(cfg, exc: Exception, what: str) -> None:
-    report(exc, what, bool(cfg.get("verbose")))
+def _report(verbose: bool, exc: Exception, what: str) -> None:
+    jobresults.note_error(report(exc, what, verbose))      # a sweep names its job with this line
     log.error(f"{what}: {exc}", exc_info=exc)
 
 
-def _refuse_parallel_hardware(cfg, hc) -> None:
+def _refuse_parallel_hardware(settings, hc) -> None:
     """One robot: real hardware only with Hydra's sequential launcher."""
     launcher = str(OmegaConf.select(hc, "launcher._target_", default=""))
-    if cfg.hardware.get("backend") != "sim" and launcher and not launcher.endswith("BasicLauncher"):
+    if settings.backend != "sim" and launcher and not launcher.endswith("BasicLauncher"):
         raise ValueError(f"hydra/launcher: {launcher} runs jobs in parallel; hardware="
-                         f"{cfg.hardware.get('backend')} drives one robot, so sweeps on it must use the "
+                         f"{settings.backend} drives one robot, so sweeps on it must use the "
                          f"default sequential launcher")
 
 
@@ -183,10 +188,8 @@ def _app(cfg) -> None:
 
 
 def main() -> None:
-    if sys.argv[1:] in (["--list"], ["list"]):                 # what there is to run, one line each
-        from .listing import listing
-        print(listing(CONF_DIR))
-        sys.exit(0)
+    from .entry import answer_without_hydra
+    answer_without_hydra(sys.argv[1:])
     register()
     paths.register_resolvers()               # ${tf_name:...} in the run directories' names
     logging.raiseExceptions = False          # a log file on a full disk must not print tracebacks
@@ -279,6 +282,11 @@ class SweepSummary(jobresults.SweepResults):
     def summarise(self, config, results: list[dict]) -> None:
         root = Path(config.hydra.sweep.dir)
         rows = sweep_rows(root)
+        recorded = {r["job"] for r in rows}          # a job that recorded nothing is a row too, saying why
+        rows += [{"job": Path(r["dir"]).name, **override_cells(r.get("overrides") or []),
+                  "status": jobresults.outcome(r), "error": r.get("error") or ""}
+                 for r in results if r["code"] != 0 and Path(r["dir"]).name not in recorded]
+        rows.sort(key=lambda r: _job_number(r["job"]))
         if rows:
             write_summary(root, rows)
             figure = ""
@@ -287,11 +295,12 @@ class SweepSummary(jobresults.SweepResults):
                 figure = ", sweep.png" if sweep_figure(root, rows, swept_columns(rows)) else ""
             except Exception as exc:      # noqa: BLE001 - the table is the record; the figure a view of it
                 log.warning(f"sweep figure not drawn: {type(exc).__name__}: {exc}")
-            unanalysed = sum(r["status"] == "success" and r["analysis"] != "complete" for r in rows) \
+            unanalysed = sum(r["status"] == "success" and r.get("analysis") != "complete" for r in rows) \
                 if config.get("analyze") else 0
-            print(f"sweep {root}: {len(rows)} runs, {sum(r['status'] == 'success' for r in rows)} succeeded"
-                  + (f", {unanalysed} of them not (completely) analysed" if unanalysed else "")
+            print(f"sweep {root}: {jobresults.counts(results)}"
+                  + (f"; {unanalysed} successful run(s) not (completely) analysed" if unanalysed else "")
                   + f"; summary.md, summary.csv{figure}")
+
 
 
 #: overrides that say how a sweep is shown, not what it varies
@@ -311,11 +320,7 @@ def sweep_rows(root: Path) -> list[dict]:
         info = json.loads(run_json.read_text())
         overrides_file = job / ".hydra" / "overrides.yaml"
         overrides = OmegaConf.load(overrides_file) if overrides_file.exists() else info.get("overrides") or []
-        row = {"job": job.name}
-        for o in overrides:
-            key, _, value = str(o).partition("=")
-            if key.lstrip("+~") not in QUIET_OVERRIDES:
-                row[key.lstrip("+~")] = value
+        row = {"job": job.name, **override_cells(overrides)}
         row.update({"status": info.get("status"), "run_id": info.get("run_id"), "error": info.get("error") or "",
                     "analysis": resume.analysis_state(job)})
         current = analyses.current_dir(job)
@@ -325,6 +330,17 @@ def sweep_rows(root: Path) -> list[dict]:
             row.update({f"result.{k}": v for k, v in runinfo.flatten(headline).items()})
         rows.append(row)
     return rows
+
+
+def override_cells(overrides) -> dict[str, str]:
+    """A job's overrides as its table's cells: key → value (``protocol.sweep_speed`` → ``20``),
+    those that only say how a sweep is shown (:data:`QUIET_OVERRIDES`) left out."""
+    cells = {}
+    for o in overrides:
+        key, _, value = str(o).partition("=")
+        if key.lstrip("+~") not in QUIET_OVERRIDES:
+            cells[key.lstrip("+~")] = value
+    return cells
 
 
 def swept_columns(rows: list[dict]) -> list[str]:

@@ -27,11 +27,10 @@ import numpy as np
 from tactile_flow.hardware.errors import DeviceError, ProtectiveStopError
 from tactile_flow.runstore.status import RunStatus
 from tactile_flow.tactile.slip import CAUSES
-from tactile_flow.validation import build
-
-from .interlocks import InterlockTripped, Interlocks, SafetyConfig
+from .interlocks import InterlockTripped, Interlocks, LinkLost
 from .interrupts import Interrupts
 from .plan import Geometry, Limits, Plan, PlannedStep
+from .settings import RunSettings, run_settings
 from .steps import Criterion
 
 SUCCESS, ABORTED, FAILED = RunStatus.SUCCESS, RunStatus.ABORTED, RunStatus.FAILED
@@ -55,24 +54,23 @@ class Outcome:
 class RunContext(Geometry):
     """What a step's ``run`` sees: the lab, the recorder, parameters and helpers."""
 
-    def __init__(self, lab, recorder, cfg, progress=None, live=None, interrupts: Interrupts | None = None):
-        super().__init__(cfg.hardware, lab.surface, cfg.protocol.finger)
+    def __init__(self, lab, recorder, settings: RunSettings, progress=None, live=None,
+                 interrupts: Interrupts | None = None):
+        super().__init__(settings.hardware, lab.surface, settings.protocol.finger)
         self.live = live                          # a protocols.live.LiveMonitor, or None
         self.hand_targets: dict[str, float] = {}  # joint angles commanded so far (rad)
         self.hand_until = -np.inf                 # clock time the commanded hand motion ends
-        self.lab, self.recorder, self.params = lab, recorder, cfg.protocol
-        self.limits = Limits.from_hardware(cfg.hardware)
+        self.lab, self.recorder, self.params = lab, recorder, settings.protocol
+        self.limits = Limits.from_hardware(settings.hardware)
         self.clock = lab.clock
         self.poll = 1.0 / lab.biotac.rate_hz
         self.stop_requested = False
         self.interrupts = interrupts or Interrupts()
         self.progress = progress
         self.fingers = list(lab.biotac.fingers)
-        self.finger_index = self.fingers.index(cfg.protocol.finger)
+        self.finger_index = self.fingers.index(settings.protocol.finger)
         self.tare_pdc = np.zeros(len(self.fingers))
-        # a plain dataclass, not the OmegaConf node: the interlocks read it every tick
-        safety = build(SafetyConfig, cfg.get("safety"), "safety")
-        self.interlocks = Interlocks(safety, self.limits, self.fingers, lab.biotac.rate_hz, self.clock)
+        self.interlocks = Interlocks(settings.safety, self.limits, self.fingers, lab.biotac.rate_hz, self.clock)
 
     @property
     def pose(self) -> np.ndarray:
@@ -232,18 +230,21 @@ class _Unrecorded:
 class RunEngine:
     """Runs a :class:`~protocols.plan.Plan` on a connected lab, recording as it goes.
 
-    ``interrupts``: the run's :class:`~protocols.interrupts.Interrupts` (installed by the
-    caller); without one the engine installs its own for the duration of :meth:`run`."""
+    ``cfg``: the run's :class:`~protocols.settings.RunSettings` (a composed config is checked
+    first). ``interrupts``: the run's :class:`~protocols.interrupts.Interrupts` (installed by
+    the caller); without one the engine installs its own for the duration of :meth:`run`."""
 
     def __init__(self, lab, recorder, cfg, plan: Plan, progress_factory=None, log=print, live=None,
                  interrupts: Interrupts | None = None):
-        self.lab, self.recorder, self.cfg, self.plan = lab, recorder, cfg, plan
+        cfg = run_settings(cfg)
+        self.lab, self.recorder, self.settings, self.plan = lab, recorder, cfg, plan
         self.progress_factory = progress_factory
         self.log = log
         self._own_interrupts = interrupts is None
         self.interrupts = interrupts or Interrupts(log)
         self.ctx = RunContext(lab, recorder, cfg, live=live, interrupts=self.interrupts)
         self.done = 0                              # steps ended so far
+        self._pump_failure: str | None = None      # the pump stop's last error, said once
 
     def run(self, start_recording=None) -> Outcome:
         """Run the plan; never raises past the safe stop (the outcome says what happened).
@@ -259,7 +260,7 @@ class RunEngine:
             try:
                 return self._run_plan(start_recording)
             except KeyboardInterrupt:      # the second Ctrl-C landed while the first was being handled
-                self._make_safe(retract=False)
+                self._make_safe(retract=False, reason="second Ctrl-C")
                 return Outcome(ABORTED, "stopped at once by a second Ctrl-C", self.done)
 
     def _run_plan(self, start_recording=None) -> Outcome:
@@ -270,7 +271,7 @@ class RunEngine:
                     self._run_step(planned)
                     self.done += 1
                 self._start_recording(recorder, start_recording)
-            if self.cfg.protocol.get("tare", True):
+            if self.settings.protocol.tare:
                 self.ctx.tare()
             if self.ctx.live is not None:
                 self.ctx.live.begin()
@@ -280,22 +281,26 @@ class RunEngine:
             return Outcome(SUCCESS, steps_done=self.done)
         except InterlockTripped as exc:
             self.ctx.event("interlock", exc.name, {**exc.detail, "step": self.done})
-            self._make_safe(retract=True)
+            self._make_safe(retract=True, reason=f"interlock {exc.name}")
             return Outcome(ABORTED, str(exc), self.done)
+        except LinkLost as exc:                # a device's link is down: the safe stop at once, then fail
+            self.ctx.event("interlock", "link_lost", {"device": exc.device, "error": str(exc), "step": self.done})
+            self._make_safe(retract=exc.device != "arm" and self._arm_free(), reason=f"{exc.device} link lost")
+            return Outcome(FAILED, f"{exc.device} link lost: {exc}", self.done)
         except RunAborted as exc:
             self.ctx.event("abort", "operator", {"reason": str(exc), "step": self.done})
-            self._make_safe(retract=True)
+            self._make_safe(retract=True, reason="operator")
             reason = "stopped at once by a second Ctrl-C" if self.interrupts.motion_signals > 1 else str(exc)
             return Outcome(ABORTED, reason, self.done)
         except KeyboardInterrupt:
             self.ctx.event("abort", "operator", {"reason": "second Ctrl-C: immediate stop", "step": self.done})
-            self._make_safe(retract=False)
+            self._make_safe(retract=False, reason="second Ctrl-C")
             return Outcome(ABORTED, "stopped at once by a second Ctrl-C", self.done)
         except Exception as exc:  # a failing step must still leave the robot safe
             message = f"{type(exc).__name__}: {exc}"
             step = self.plan.steps[self.done].name if self.done < len(self.plan.steps) else "engine"
             self.ctx.event("error", step, {"error": message, "step": self.done})
-            self._make_safe(retract=self._arm_free())
+            self._make_safe(retract=self._arm_free(), reason=f"error in {step}")
             return Outcome(FAILED, message, self.done)
         finally:
             self._stop_pump()
@@ -350,9 +355,14 @@ class RunEngine:
             self.ctx.progress = None
         self.ctx.event("step_end", planned.name, {"key": step.key})
 
-    def _make_safe(self, retract: bool) -> None:
+    def _make_safe(self, retract: bool, reason: str = "") -> None:
         """Stop motion and the pump; optionally back the finger away along the approach.
-        Never raises: what could not be done is logged (the reason we stop comes first)."""
+        Never raises: what could not be done is logged (the reason we stop comes first). A
+        ``safe_stop`` event marks its start (the reaction time of an interlock is measured to it)."""
+        try:
+            self.ctx.event("safe_stop", reason or "stop", {"retract": bool(retract)})
+        except Exception:                         # noqa: BLE001 - the recorder may be gone: stop anyway
+            pass
         arm = self.lab.arm
         try:
             arm.stop(self.ctx.limits.max_accel)
@@ -409,6 +419,8 @@ class RunEngine:
             self.interrupts.raise_deferred()
 
     def _stop_pump(self) -> None:
+        """Stop the pump (again at the end of every run: the stop is idempotent); a failure is
+        said once, not again when the retry at the end fails the same way."""
         for _ in range(2):                        # a Ctrl-C may cut the command: once more
             try:
                 self.lab.pump.stop()
@@ -416,5 +428,7 @@ class RunEngine:
             except KeyboardInterrupt:
                 continue
             except Exception as exc:
-                self.log(f"warning: could not stop the pump: {exc}")
+                if str(exc) != self._pump_failure:
+                    self._pump_failure = str(exc)
+                    self.log(f"warning: could not stop the pump: {exc}")
                 return

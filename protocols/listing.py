@@ -1,5 +1,8 @@
 """``tactile-run --list``: the protocols, surfaces, hardware and experiments this project
-ships (``conf/``), one line each: the first sentence of each file's header comment.
+ships (``conf/``) and those of the command line's ``hydra.searchpath`` folders, one line each:
+the first sentence of each file's header comment, a search path's files marked with where
+they are. Hydra looks in ``conf/`` first, so a search-path file named as a packaged one is
+never used: it is listed as hidden.
 
 Reads the files' text only (no Hydra, no YAML parsing), so it answers at once.
 """
@@ -8,6 +11,8 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+
+from tactile_flow.cliapp.quick_help import searchpath_folder
 
 GROUPS = (("protocol", "protocols", "tactile-run protocol=NAME"),
           ("surface", "surfaces", "tactile-run surface=NAME (a protocol chooses its own)"),
@@ -32,13 +37,28 @@ def summary(path: Path) -> str:
     return sentence if len(sentence) <= WIDTH else sentence[:WIDTH - 3].rstrip() + "..."
 
 
-def listing(conf_dir: Path) -> str:
-    """Every group's options with their one-line summaries."""
+def listing(conf_dir: Path, searchpath=()) -> str:
+    """Every group's options with their one-line summaries: ``conf_dir``'s, then those of each
+    ``searchpath`` entry (``file://`` folders; ``pkg://`` packages), in Hydra's order."""
+    folders = [(None, Path(conf_dir))] + [(entry, folder) for entry in searchpath
+                                          for folder in [searchpath_folder(entry)] if folder is not None]
     out = []
     for group, title, usage in GROUPS:
-        files = sorted((conf_dir / group).glob("*.yaml"))
+        options: dict[str, tuple[Path, str | None]] = {}
+        hidden = []
+        for entry, folder in folders:
+            for f in sorted((folder / group).glob("*.yaml")) if (folder / group).is_dir() else []:
+                if f.stem in options:
+                    hidden.append(f"  ({f.stem} in {entry} is hidden by the one before it in the search path)")
+                else:
+                    options[f.stem] = (f, entry)
         out.append(f"{title} ({usage}):")
-        width = max((len(f.stem) for f in files), default=0)
-        out += [f"  {f.stem:<{width}}  {summary(f)}" for f in files]
+        width = max((len(name) for name in options), default=0)
+        for name in sorted(options):
+            path, entry = options[name]
+            out.append(f"  {name:<{width}}  {summary(path)}" + (f"  [{entry}]" if entry else ""))
+        out += hidden
         out.append("")
     return "\n".join(out).rstrip()
+
+

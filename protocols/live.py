@@ -73,20 +73,6 @@ def live_fingers(cfg: LiveConfig, connected) -> tuple[str, ...]:
     return tuple(f for f in connected if f in chosen)
 
 
-def live_settings(cfg) -> LiveConfig:
-    """The run config's ``live`` node as a plain :class:`LiveConfig` (defaults if absent)."""
-    from omegaconf import OmegaConf
-    node = cfg.get("live")
-    if node is None:
-        return LiveConfig()
-    values = OmegaConf.to_container(node, resolve=True) if OmegaConf.is_config(node) else dict(node)
-    unknown = sorted(set(values) - {f.name for f in fields(LiveConfig)})
-    if unknown:
-        raise ValueError(f"live.{unknown[0]}: unknown key; expected some of {[f.name for f in fields(LiveConfig)]}")
-    values["slip"] = slip_config(values.get("slip") or {})
-    return LiveConfig(**values)
-
-
 def viewer_names() -> list[str]:
     """The live viewers installed (``live.viewer`` values)."""
     from importlib.metadata import entry_points
@@ -120,37 +106,19 @@ def warm_up(model: TactileModel, views) -> None:
         flow.push(i, 0.01 * i, np.full((1, 24), 3000 - 100 * i))
 
 
-def tactile_config(analysis: dict, views) -> TactileConfig:
-    """The online pipeline's parameters: the analysis config's ``tactile`` and ``flow``
-    (so live and offline frames are the same), the live ``views``, and no smoother.
+def tactile_config(offline: TactileConfig | None, views) -> TactileConfig:
+    """The online pipeline's parameters: the offline analysis's (``offline``, the typed
+    ``analysis.tactile``; None: the defaults) so live and offline frames are the same, the
+    live ``views``, no smoother, and the flow without its offline-only settings.
 
     A live stream cannot scale each contact to its own peak before the contact has ended:
     with ``intensity_range: contact`` (the offline default) the live frames keep the fixed
-    0–8 kΩ scale the slip detector was tuned on. The static-flow reference keys are the
-    offline analysis's own."""
-    tk = dict(analysis.get("tactile") or {})
-    if isinstance(tk.get("intensity_range"), str):
-        tk.pop("intensity_range")
-    flow_keys = {f.name for f in fields(FlowConfig)} - {"dis", "tvl1"}       # not the offline-only keys
-    fk = {k: v for k, v in dict(analysis.get("flow") or {}).items() if k in flow_keys}
-    known = {f.name for f in fields(TactileConfig)}
-    unknown = sorted(set(tk) - known)
-    if unknown:
-        raise ValueError(f"analysis.tactile.{unknown[0]}: unknown key; expected some of {sorted(known)}")
-    tk = {k: tuple(v) if isinstance(v, (list, tuple)) else v for k, v in tk.items()}
-    return replace(TactileConfig(**tk), smooth=False, views=tuple(views), flow=FlowConfig(**fk))
-
-
-def slip_config(node) -> SlipConfig:
-    """``live.slip`` (a config node or dict) → :class:`SlipConfig` (``ValueError`` naming a bad key)."""
-    if isinstance(node, SlipConfig):
-        return node
-    values = dict(node.items()) if hasattr(node, "items") else {}
-    known = {f.name for f in fields(SlipConfig)}
-    unknown = sorted(set(values) - known)
-    if unknown:
-        raise ValueError(f"live.slip.{unknown[0]}: unknown threshold; expected some of {sorted(known)}")
-    return SlipConfig(**values)
+    0–8 kΩ scale the slip detector was tuned on (the analysis config's ``intensity_range``
+    field holds it then)."""
+    offline = offline or TactileConfig()
+    flow = FlowConfig(**{f.name: getattr(offline.flow, f.name) for f in fields(FlowConfig)
+                         if f.name not in ("dis", "tvl1")})          # not the offline-only keys
+    return replace(offline, smooth=False, views=tuple(views), flow=flow)
 
 
 class LiveMonitor:
@@ -175,7 +143,7 @@ class LiveMonitor:
         self.rows = [biotac.fingers.index(f) for f in self.fingers]
         self.biotac = biotac
         self.tap = biotac.tap(maxlen=int(10 * biotac.rate_hz))        # 10 s: a stalled engine drops, never grows
-        self.detector = SlipDetector(len(self.fingers), slip_config(cfg.slip))
+        self.detector = SlipDetector(len(self.fingers), cfg.slip)
         self.flow: online.OnlineFlow | None = None
         self._rest_sum = np.zeros((len(self.fingers), 24))
         self._rest_n = 0

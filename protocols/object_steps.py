@@ -212,7 +212,7 @@ TWIST_KEYS = (("angle", "rotation_deg"), ("speed", "rotation_speed_deg_s"))
 def _value(s: Step, ctx, name: str, protocol_key: str) -> tuple[float, str]:
     """The step's ``name`` parameter and its YAML key, or the protocol's default and its key."""
     v = getattr(s, name)
-    return (ctx.params[protocol_key], f"protocol.{protocol_key}") if v is None else (v, f"{s.key}.{name}")
+    return (getattr(ctx.params, protocol_key), f"protocol.{protocol_key}") if v is None else (v, f"{s.key}.{name}")
 
 
 def _stage_speed(value: float, limit: float, key: str, unit: str, scale: float, limit_key: str) -> None:

@@ -13,7 +13,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from omegaconf import OmegaConf
 
 from tactile_flow.hardware.arm import trapezoid_time
 from tactile_flow.hardware.errors import brief
@@ -21,7 +20,8 @@ from tactile_flow.hardware.transforms import rotvec_to_matrix
 from tactile_flow.hardware.surfaces import Surface, load_surface
 from tactile_flow.tactile.geometry import cached_fit_ellipsoid, load_taxels
 
-from .steps import Criterion, ProtocolError, Repeat, Step, parse_steps
+from .settings import run_settings
+from .steps import Criterion, ProtocolError, Repeat, Step
 
 UR10_REACH_M = 1.3          # UR10 working radius from the base axis
 MAX_STEPS = 10_000          # expanded steps: far beyond any lab protocol, short of a runaway repeat
@@ -44,12 +44,12 @@ class Limits:
 
     @classmethod
     def from_hardware(cls, hw) -> "Limits":
-        hand = hw.get("hand") or {}
+        """From a typed hardware config (:class:`~hardware.config.SimConfig`, :class:`~hardware.lab.LabConfig`)."""
         return cls(workspace_min=np.asarray(hw.workspace.min_m, float),
                    workspace_max=np.asarray(hw.workspace.max_m, float),
                    max_speed=float(hw.arm.max_speed_m_s), max_accel=float(hw.arm.max_accel_m_s2),
                    max_force=float(hw.arm.max_contact_force_n), max_pump_rate=float(hw.pump.max_rate_ml_min),
-                   max_hand_velocity=float(hand.get("max_velocity_rad_s", math.inf)))
+                   max_hand_velocity=float(hw.hand.max_velocity_rad_s))
 
 
 class Geometry:
@@ -66,7 +66,7 @@ class Geometry:
         self.surface = surface
         self.home = np.asarray(hw.arm.home_pose, float)
         self.R_tcp = rotvec_to_matrix(self.home[3:])
-        self.stage_cfg = hw.get("stage")          # the object stage's settings; None: the lab has none
+        self.stage_cfg = hw.stage                 # the object stage's settings; None: the lab has none
         tip = np.asarray(hw.fingertips[finger], float)
         self.R_tip = rotvec_to_matrix(tip[3:])
         fit = cached_fit_ellipsoid(load_taxels())
@@ -180,11 +180,8 @@ class PlanContext(Geometry):
         return [self.pose.copy()], duration
 
     def check_parameters(self) -> None:
-        """The protocol-level parameters, whichever steps use them: finite numbers, and
-        ``accel`` within the arm's limit."""
-        for name, value in self.params.items():
-            if isinstance(value, float) and not math.isfinite(value):
-                raise ProtocolError(f"protocol.{name}", f"expected a finite number, got {brief(value)}")
+        """The protocol-level parameters, whichever steps use them (finite already:
+        :func:`protocols.settings.run_settings`): ``accel`` within the arm's limit."""
         if not 0 < self.params.accel * 1e-3 <= self.limits.max_accel:
             raise ProtocolError("protocol.accel", f"expected an acceleration in (0, {self.limits.max_accel * 1e3:g}] "
                                                   f"mm/s² (hardware.arm.max_accel_m_s2), "
@@ -266,22 +263,22 @@ class Plan:
 
 
 def make_plan(cfg) -> Plan:
-    """Parse and check ``cfg.protocol`` against ``cfg.hardware`` and ``cfg.surface``, and its
-    expected duration against ``safety.max_duration_s``.
+    """Check the protocol's steps against the hardware and the surface, and its expected
+    duration against ``safety.max_duration_s``; ``cfg``: :class:`~protocols.settings.RunSettings`
+    (or the composed config, checked first by :func:`~protocols.settings.run_settings`).
 
     Raises :class:`ProtocolError` (or the hardware's ``ConfigError``) naming the key at
     fault; never touches hardware.
     """
-    params = cfg.protocol
-    raw = OmegaConf.to_container(params.steps, resolve=True) if OmegaConf.is_config(params.steps) else params.steps
-    steps = parse_steps(raw)
-    surface = load_surface(cfg.surface) if cfg.get("surface") is not None else None
-    max_duration = _max_duration(cfg)
-    ctx = PlanContext(cfg.hardware, surface, params, Limits.from_hardware(cfg.hardware), max_duration)
+    settings = run_settings(cfg)
+    params, hardware = settings.protocol, settings.hardware
+    surface = load_surface(settings.surface) if settings.surface is not None else None
+    max_duration = settings.safety.max_duration_s
+    ctx = PlanContext(hardware, surface, params, Limits.from_hardware(hardware), max_duration)
     ctx.check_parameters()
-    if params.finger not in cfg.hardware.fingers:
+    if params.finger not in hardware.fingers:
         raise ProtocolError("protocol.finger", f"{params.finger!r} has no sensor in hardware.fingers "
-                                               f"{list(cfg.hardware.fingers)}")
+                                               f"{list(hardware.fingers)}")
     planned: list[PlannedStep] = []
 
     def walk(items):
@@ -301,7 +298,7 @@ def make_plan(cfg) -> Plan:
                                            f"longer than safety.max_duration_s={max_duration:g} s")
             planned.append(PlannedStep(len(planned), s, start, duration, waypoints))
 
-    walk(steps)
+    walk(params.steps)
     return Plan(protocol=params.name, steps=planned, labels=list(params.labels), setup=_setup_steps(params, planned))
 
 
@@ -315,15 +312,6 @@ def _setup_steps(params, planned: list[PlannedStep]) -> int:
                                              "add a `press` step (it and the steps before it run before the "
                                              "recording starts)")
     return presses[0] + 1
-
-
-def _max_duration(cfg) -> float:
-    """``safety.max_duration_s``: the longest a protocol may be planned to run (s)."""
-    value = OmegaConf.select(cfg, "safety.max_duration_s", default=DEFAULT_MAX_DURATION_S) \
-        if OmegaConf.is_config(cfg) else DEFAULT_MAX_DURATION_S
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < math.inf:
-        raise ProtocolError("safety.max_duration_s", f"expected a number of s > 0, got {brief(value)}")
-    return float(value)
 
 
 def format_timeline(plan: Plan) -> str:

@@ -105,7 +105,7 @@ def record_inputs(run_dir: Path, cfg) -> dict | None:
                        "sha256": hashlib.sha256(data).hexdigest()})
     named = []
     for key in INPUT_FILE_KEYS:
-        value = OmegaConf.select(cfg, key, default=None)
+        value = _value(cfg, key)
         if isinstance(value, str) and Path(value).expanduser().is_file():
             data = Path(value).expanduser().read_bytes()
             rel = f"{CONFIG_DIR}/files/{key}/{Path(value).name}"
@@ -117,6 +117,15 @@ def record_inputs(run_dir: Path, cfg) -> dict | None:
             "files": copied, "value_files": named,
             "task_overrides": list(OmegaConf.to_container(hc.overrides.task)),
             "hydra_overrides": list(OmegaConf.to_container(hc.overrides.hydra))}
+
+
+def _value(settings, key: str):
+    """The value of dotted ``key`` in the run's typed settings (:class:`~protocols.settings.RunSettings`),
+    or None where it has none (a backend without that key)."""
+    value = settings
+    for name in key.split("."):
+        value = getattr(value, name, None)
+    return value
 
 
 def record_code(run_dir: Path) -> dict:

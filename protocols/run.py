@@ -15,16 +15,14 @@ from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from pathlib import Path
 
-from omegaconf import OmegaConf
-from tqdm import tqdm
 
 from tactile_flow.cliapp.heap import long_lived_frozen
-from tactile_flow.hardware.errors import ConfigError
-from tactile_flow.tactile.frames import DEFAULT_VIEWS
+from tactile_flow.cliapp.progress import progress_bar
 from tactile_flow.tactile.geometry import load_taxels
 from tactile_flow.runstore import RunStore, provenance, rundir, utc_now
 from tactile_flow.runstore.catalogue import register_quietly
 from tactile_flow.runstore.checksum import store_checksum
+from tactile_flow.runstore.room import RESERVE_BYTES
 from tactile_flow.tactile import warmup
 from tactile_flow.tactile.pipeline import TactileModel
 
@@ -32,11 +30,10 @@ from . import record
 from .calibration import session_baseline, store_baseline
 from .engine import FAILED, Outcome, RunEngine
 from .interrupts import Interrupts
-from .backends import check_hardware, make_lab
-from .live import (LiveConfig, LiveMonitor, live_fingers, live_settings, open_viewer, tactile_config, terminal_display,
-                   viewer_names, warm_up)
+from .backends import board_warning, make_lab
+from .live import LiveConfig, LiveMonitor, live_fingers, open_viewer, tactile_config, terminal_display, warm_up
 from .plan import Plan, format_timeline, make_plan
-from .schema import check_config
+from .settings import run_settings
 from .recorder import Recorder
 from .steps import ProtocolError
 
@@ -57,64 +54,73 @@ class RunResult:
 
 
 def run_protocol(cfg, run_dir, overrides=(), console=print, interrupts: Interrupts | None = None) -> RunResult:
-    """Check the plan, then (unless ``cfg.plan_only``) run it on ``cfg.hardware``.
+    """Check the plan, then (unless ``plan_only``) run it on the hardware.
 
-    Bad config or protocol raises ``ValueError`` (``ProtocolError``/``ConfigError``, naming
-    the key) before any hardware is touched. A run that starts always ends with a closed
+    ``cfg``: the run's :class:`~protocols.settings.RunSettings`, or the composed config (checked
+    first by :func:`~protocols.settings.run_settings`). Bad config or protocol raises
+    ``ValueError`` (``ProtocolError``/``ConfigError``, naming the key) before any hardware is
+    touched. A run that starts always ends with a closed
     store and ``run.json``, whatever its status (if the disk allows: the result's error then
     names ``tactile-recover``). The run directory is locked for the run (:mod:`.rundir`);
     ``interrupts`` owns Ctrl-C and SIGTERM (installed here when not given).
     """
     run_dir = Path(run_dir)
-    check_config(cfg)
+    cfg = run_settings(cfg)
     plan = make_plan(cfg)
     live, model = live_setup(cfg, plan, build=not cfg.plan_only, console=console)
     if cfg.plan_only:
-        check_hardware(cfg)
         console(format_timeline(plan))
         return RunResult("planned", run_dir, plan)
 
+    mismatch = board_warning(cfg)                   # an emulated lab on another board: said before anything moves
+    if mismatch:
+        console(mismatch)
     lab = make_lab(cfg)
     baseline = session_baseline(cfg.hardware, lab)
     own = interrupts is None
     interrupts = interrupts or Interrupts(console)
     store_path = run_dir / "run.zarr"
     with (interrupts.installed() if own else nullcontext()), rundir.locked(run_dir), lab:
-        prov = provenance.collect(OmegaConf.to_yaml(cfg, resolve=True), list(overrides), lab.identities(),
-                                  _calibration(lab), cfg.hardware.get("seed"), protocol=plan.protocol)
-        with interrupts.during("writing"):          # from the store's creation to run.json: no signal raises
-            prov.update(_reproducible(run_dir, cfg))
-            store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
-                                    run_id=prov["run_id"], provenance=provenance.summary(prov),
-                                    attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
-                                           "tare": bool(cfg.protocol.get("tare", True))},
-                                    live=(live_fingers(live, lab.biotac.fingers), model.config.views)
-                                    if model else None, streams=lab.streams())
-            stored = store_baseline(store, baseline, lab.biotac.fingers)
-            if getattr(lab, "truth", None) is not None:
-                lab.truth.conditions = _conditions(cfg, lab, stored, plan)
-            recorder = Recorder(store, lab.sources(), lab.clock)
-            monitor, outcome = None, Outcome(FAILED, "the run engine could not start")
-            screen = ProgressConsole() if cfg.progress else None
-            try:
-                with long_lived_frozen():      # shorter collector pauses while the readers run
-                    if not plan.setup:
-                        recorder.start()
-                    if model:
-                        viewer = open_viewer(live.viewer, live_fingers(live, lab.biotac.fingers), model, run_dir, console)
-                        monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
-                                              display=screen.live_line() if screen else terminal_display(),
-                                              viewer=viewer)
-                    outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=screen.bar if screen else None,
-                                        log=console,
-                                        live=monitor, interrupts=interrupts).run(
-                        start_recording=recorder.start if plan.setup else None)
-            except Exception as exc:              # the engine never raises past its safe stop; this is the rest
-                outcome = Outcome(FAILED, f"{type(exc).__name__}: {exc}")
-            finally:
-                if screen:
-                    screen.close()
-                outcome, stats = _close(run_dir, prov, recorder, monitor, lab, outcome)
+        prov = provenance.collect(cfg.config_yaml, list(overrides), lab.identities(),
+                                  _calibration(lab), getattr(cfg.hardware, "seed", None), protocol=plan.protocol)
+        # From the store's creation to the job's end no signal raises: the engine stops the run
+        # safely on one, and the store, run.json, the devices' close and the catalogue entry are
+        # written whole (a signal raised on the way out would report a closed run as never started).
+        interrupts.phase = "writing"
+        prov.update(_reproducible(run_dir, cfg))
+        store = RunStore.create(store_path, protocol=plan.protocol, fingers=lab.biotac.fingers,
+                                run_id=prov["run_id"], provenance=provenance.summary(prov),
+                                attrs={"labels": plan.labels, "plan_duration_s": plan.duration,
+                                       "tare": cfg.protocol.tare},
+                                live=(live_fingers(live, lab.biotac.fingers), model.config.views)
+                                if model else None, streams=lab.streams(), room_bytes=RESERVE_BYTES)
+        stored = store_baseline(store, baseline, lab.biotac.fingers)
+        if getattr(lab, "truth", None) is not None:
+            lab.truth.conditions = _conditions(cfg, lab, stored, plan)
+        recorder = Recorder(store, lab.sources(), lab.clock)
+        monitor, outcome = None, Outcome(FAILED, "the run engine could not start")
+        screen = ProgressConsole() if cfg.progress else None
+        try:
+            with long_lived_frozen():      # shorter collector pauses while the readers run
+                if not plan.setup:
+                    recorder.start()
+                if model:
+                    viewer = open_viewer(live.viewer, live_fingers(live, lab.biotac.fingers), model, run_dir, console)
+                    monitor = LiveMonitor(lab.biotac, recorder, model, live, lab.clock,
+                                          display=screen.live_line() if screen else terminal_display(),
+                                          viewer=viewer)
+                outcome = RunEngine(lab, recorder, cfg, plan, progress_factory=screen.bar if screen else None,
+                                    log=console,
+                                    live=monitor, interrupts=interrupts).run(
+                    start_recording=recorder.start if plan.setup else None)
+        except Exception as exc:              # the engine never raises past its safe stop; this is the rest
+            outcome = Outcome(FAILED, f"{type(exc).__name__}: {exc}")
+        finally:
+            if screen:
+                screen.close()
+            outcome, stats = _close(run_dir, prov, recorder, monitor, lab, outcome)
+            for line in wire_warnings(wire_reports(lab)):
+                console(line)
     register_quietly(run_dir, console)            # tactile-runs list finds it (its analysis updates it)
     return RunResult(outcome.status, run_dir, plan, store_path, outcome.error, stats)
 
@@ -141,7 +147,7 @@ def _close(run_dir: Path, prov: dict, recorder: Recorder, monitor, lab, outcome:
     """Close the store and write ``run.json``. A store that could not record everything is
     ``failed`` (never the engine's ``success``); what could not be written is said in the
     error, with what to do. Returns the final outcome and the recorder's stream stats."""
-    attrs = {"error": outcome.error}
+    attrs = {"error": outcome.error, "wire": wire_reports(lab)}
     if monitor is not None:
         try:
             attrs["live"] = monitor.close()
@@ -157,7 +163,7 @@ def _close(run_dir: Path, prov: dict, recorder: Recorder, monitor, lab, outcome:
         problems.append(f"recording failed ({type(cause).__name__}: {cause}); the store keeps every sample "
                         f"committed before that" + ("" if store.closed else " but could not be closed"))
         status = FAILED
-    extra = {"error": "; ".join(problems) or error, "store": store.path.name}
+    extra = {"error": "; ".join(problems) or error, "store": store.path.name, "wire": attrs["wire"]}
     if not problems and store.closed:
         try:                                      # what reproducing the run compares (runstore.checksum)
             extra["store_checksum"] = store_checksum(store.path)
@@ -178,41 +184,50 @@ def _close(run_dir: Path, prov: dict, recorder: Recorder, monitor, lab, outcome:
     return Outcome(status, error, outcome.steps_done), stats
 
 
+def wire_reports(lab) -> dict:
+    """Device → what its driver refused on the wire (:meth:`hardware.device.Device.wire_report`),
+    for the devices that report; stored in the store's root attribute ``wire`` and in ``run.json``."""
+    out = {}
+    for name, device in lab.devices.items():
+        try:
+            report = device.wire_report()
+        except Exception as exc:                  # noqa: BLE001 - a report must never stop the close
+            report = {"error": f"{type(exc).__name__}: {exc}"}
+        if report is not None:
+            out[name] = report
+    return out
+
+
+def wire_warnings(reports: dict) -> list[str]:
+    """One line per device that refused messages: how many, why, and the last one."""
+    lines = []
+    for name, r in reports.items():
+        if r.get("refused"):
+            reasons = ", ".join(f"{n} {why}" for why, n in (r.get("reasons") or {}).items())
+            lines.append(f"warning: {name}: {r['refused']} message(s) refused on the wire ({reasons})"
+                         + (f"; the last: {r['last']}" if r.get("last") else ""))
+    return lines
+
+
 def live_setup(cfg, plan: Plan, build: bool = True, console=print) -> tuple[LiveConfig, TactileModel | None]:
     """The checked ``live`` settings and, when the run computes live flow (``live.enabled``,
     or auto when a step reacts to slip) and ``build``, the online tactile model (else
     ``None``), its kernels compiled (on every core, the first time on a machine). A protocol
     that reacts to slip with the live monitor turned off is refused here, before anything
-    moves."""
-    try:
-        live = live_settings(cfg)
-    except (ValueError, TypeError) as exc:
-        raise ConfigError("live", str(exc)) from None
+    moves. ``cfg``: :class:`~protocols.settings.RunSettings` (or the composed config)."""
+    cfg = run_settings(cfg)
+    live = cfg.live
     reacting = plan.slip_steps()
-    if not cfg.protocol.get("tare", True) and (live.enabled or reacting):
+    if not cfg.protocol.tare and (live.enabled or reacting):
         what = f"{reacting[0]} reacts to slip" if reacting else "live.enabled=true"
         raise ProtocolError("protocol.tare", f"false starts the run in contact without a tare, but {what}: the "
                                              f"live monitor needs a tare at rest")
     if live.enabled is False and reacting:
         raise ProtocolError(reacting[0], "reacts to slip, but live.enabled=false turns the slip detector off; "
                                          "drop live.enabled=false or the step's until: slip / on_slip")
-    if live.viewer is not None and live.viewer not in viewer_names():
-        raise ConfigError("live.viewer", f"{live.viewer!r}: expected one of {viewer_names()} (or null)")
-    if live.enabled is False and live.viewer:
-        raise ConfigError("live.viewer", "shows the live monitor, which live.enabled=false turns off")
     if not (live.enabled or reacting or live.viewer):
         return live, None
-    unknown = [f for f in live.fingers or () if f not in cfg.hardware.fingers]
-    if unknown:
-        raise ConfigError("live.fingers", f"{unknown} have no sensor in hardware.fingers {list(cfg.hardware.fingers)}")
-    try:
-        tactile = tactile_config(cfg.get("analysis") or {}, live.views)
-    except ValueError as exc:
-        raise ConfigError("live", str(exc)) from None
-    known = {**DEFAULT_VIEWS, **tactile.custom_views}
-    bad = [v for v in live.views if v not in known] or ([] if live.views else ["(none)"])
-    if bad:
-        raise ConfigError("live.views", f"{bad}: expected one or more of {sorted(known)}")
+    tactile = tactile_config(getattr(cfg.analysis, "tactile", None), live.views)
     if not build:
         return live, None
     warmup.compile_cold(tactile, console=console, groups=warmup.LIVE)
@@ -222,7 +237,8 @@ def live_setup(cfg, plan: Plan, build: bool = True, console=print) -> tuple[Live
 
 
 def hand_off(result: RunResult, analysis_cfg, console=print) -> dict | None:
-    """Give the run store to the analysis pipeline registered as an entry point."""
+    """Give the run store to the analysis pipeline registered as an entry point, with the
+    analysis's config (typed, as :class:`~protocols.settings.RunSettings` holds it, or a node)."""
     found = entry_points(group=ANALYSIS_ENTRY_POINTS)
     if not found:
         console("analysis: no analysis pipeline installed; skipped")
@@ -239,8 +255,7 @@ def _conditions(cfg, lab, baseline: dict, plan: Plan) -> dict:
     press = next((p.step for p in plan.steps if p.step.kind == "press"), None)
     force = float("nan") if press is None else float(press.force if press.force is not None else
                                                        cfg.protocol.press_force)
-    return {"object": obj, "press_force_n": force,
-            "tare": bool(cfg.protocol.get("tare", True)), "baseline": baseline["method"]}
+    return {"object": obj, "press_force_n": force, "tare": cfg.protocol.tare, "baseline": baseline["method"]}
 
 
 def _calibration(lab) -> dict:
@@ -252,15 +267,15 @@ def _calibration(lab) -> dict:
 class ProgressConsole:
     """The console of a run with ``progress=true``: a progress bar per step, over its expected
     duration (clock seconds), and under it the live monitor's operator line (finger, flow
-    arrow, slip state) as a status line, both redrawn in place by tqdm. The live line needs a
-    terminal (it rewrites itself); the bars go to ``stream`` as tqdm's always do."""
+    arrow, slip state) as a status line, both redrawn in place by tqdm, on a terminal only (in a
+    file their carriage-return redraws are clutter: :func:`cliapp.progress.progress_bar`)."""
 
     def __init__(self, stream=None):
         self.stream = stream if stream is not None else sys.stderr
         self.status = None
 
     def bar(self, planned):
-        return tqdm(total=round(max(planned.duration, 0.01), 2), unit="s", leave=False, dynamic_ncols=True,
+        return progress_bar(total=round(max(planned.duration, 0.01), 2), unit="s", leave=False, dynamic_ncols=True,
                     position=0, file=self.stream, desc=f"step {planned.index:02d} {planned.step.kind:<8}",
                     bar_format="{desc} {percentage:3.0f}%|{bar:24}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}]")
 
@@ -270,7 +285,7 @@ class ProgressConsole:
 
     def _show(self, line: str) -> None:
         if self.status is None:
-            self.status = tqdm(total=0, position=1, leave=False, dynamic_ncols=True, file=self.stream,
+            self.status = progress_bar(total=0, position=1, leave=False, dynamic_ncols=True, file=self.stream,
                                bar_format="{desc}")
         self.status.set_description_str(line)
 

@@ -1,14 +1,10 @@
 """Typed configuration schemas, registered in Hydra's ConfigStore.
 
 ``conf/config.yaml`` starts its defaults list with ``run_schema`` (:class:`RunConfig`), so
-Hydra checks the keys it types while composing. Once it has composed, :func:`check_config`
-checks the whole tree with the one validation layer (:mod:`validation`), before anything
-is written or moves: the top-level, ``protocol``, ``safety`` and ``live`` keys against
-these dataclasses (also the keys added with ``+``, which Hydra lets through), ``analysis``
-with the analysis's own schema (:data:`ANALYSIS_CHECK`, an entry point: ``protocols`` does
-not import ``analysis``). The protocol's steps, the ``surface`` and the ``hardware`` (a
-tagged union on ``hardware.backend``: :func:`protocols.backends.check_hardware`) are checked by
-the plan, which follows at once.
+Hydra fills in the protocol's defaults and checks the keys it types while composing (its
+refusals become the same one-line errors: :func:`cliapp.runner.error_line`). Once it has
+composed, :func:`protocols.settings.run_settings` checks the whole tree in one pass and
+returns the typed :class:`~protocols.settings.RunSettings` the rest of the code takes.
 
 Protocol units are the ones a researcher writes: mm, mm/s, mm/s², s, N, ml, ml/min, rad.
 They are converted to the robot's SI units (m, m/s) at the hardware boundary.
@@ -97,20 +93,6 @@ def check_targets(node, key: str = "") -> None:
     elif isinstance(node, ListConfig):
         for i, item in enumerate(node._iter_ex(resolve=False)):
             check_targets(item, f"{key}[{i}]")
-
-
-ANALYSIS_CHECK = "tactile_flow.analysis_config"   # entry point: validate an ``analysis`` node
-
-
-def check_config(cfg) -> None:
-    """Refuse an unknown key anywhere in the run's own nodes (naming it and the nearest known
-    one) and a bad ``analysis`` node; raises :class:`validation.ConfigError`."""
-    from importlib.metadata import entry_points
-
-    from tactile_flow.validation import check_keys
-    check_keys(cfg, RunConfig, "")
-    for ep in entry_points(group=ANALYSIS_CHECK):
-        ep.load()(cfg.get("analysis"))
 
 
 def register() -> None:

@@ -37,6 +37,7 @@ from . import rundir
 from .provenance import write_run_json
 from .jsonvalues import utc_now
 from .status import ExitCode, RunStatus
+from .room import release_left_behind, room_path
 from .writer import remove_debris
 
 
@@ -66,6 +67,8 @@ def _recover(path: Path) -> dict:
         if status is None or run_id is None:
             raise ValueError(f"{path}: not a run store (no run_id/status attributes)")
         debris = [p.name for p in remove_debris(path.parent)]
+        if release_left_behind(path):            # the room a killed run kept to close: recovery's now
+            debris.append(room_path(path).name)
         if status != RunStatus.RUNNING:
             written = _run_json_of_closed(path, committed.attrs)
             return {"path": str(path), "status": status, "action": "none: the run was closed",

@@ -37,6 +37,7 @@ from tactile_flow.hardware.biotac import FINGERS
 
 from . import inflight
 from .appender import GrowingArray, MetadataTemplate, atomic_write, write_all
+from .room import RoomToClose, room_path
 from .jsonvalues import jsonable, utc_now
 from .status import RunStatus
 from .layout import SCHEMA_VERSION, STATUSES, Block, dim_sizes, fixed_coords, lab_streams, run_schema
@@ -85,7 +86,7 @@ class RunStore:
     def create(cls, path, *, protocol: str, fingers=FINGERS, run_id: str | None = None,
                provenance: dict | None = None, attrs: dict | None = None,
                chunk_s: float = 5.0, live: tuple | None = None, stage: bool = False,
-               streams: dict | None = None) -> "RunStore":
+               streams: dict | None = None, room_bytes: int = 0) -> "RunStore":
         """Create ``path`` (must not exist) with every group, coordinate and empty variable,
         root attributes (``run_id``, ``protocol``, ``status="running"``, ``start_time``,
         ``schema_version``, ``provenance``) and commit it. ``live``: ``(fingers, views)``
@@ -96,7 +97,11 @@ class RunStore:
 
         Atomic: everything is made in a hidden directory beside ``path`` and renamed into
         place, so an interrupted creation leaves no half-made store (at most the hidden
-        ``.<name>.creating-*`` directory, which :func:`remove_debris` clears)."""
+        ``.<name>.creating-*`` directory, which :func:`remove_debris` clears).
+
+        ``room_bytes``: disk held beside the store until :meth:`close` gives it back for the
+        close's own writes (:mod:`runstore.room`); a disk without that much room refuses the
+        store (``OSError``) before anything is written."""
         path = Path(path)
         if path.exists():
             raise FileExistsError(f"run store {path} already exists")
@@ -108,6 +113,15 @@ class RunStore:
                                    status=RunStatus.RUNNING, start_time=prov.get("start_time") or utc_now(), end_time=None,
                                    schema_version=SCHEMA_VERSION, fingers=list(fingers), provenance=prov,
                                    **(attrs or {})))
+        room = None
+        if room_bytes:
+            try:
+                room = RoomToClose(room_path(path), room_bytes)
+            except OSError as exc:
+                refused = OSError(f"no room on the disk of {path.parent} to record: {room_bytes >> 10} kB are kept "
+                                  f"from the start to close the run ({exc.strerror or exc})")
+                refused.errno = exc.errno
+                raise refused from None
         tmp = path.with_name(f".{path.name}.creating-{uuid.uuid4().hex[:8]}")
         try:
             _make_tree(tmp, schema, fixed_coords(streams, live), root_attrs)
@@ -117,10 +131,13 @@ class RunStore:
         except BaseException:
             inflight.settle()                    # an interrupt may have left zarr writing into it
             shutil.rmtree(tmp, ignore_errors=True)
+            if room is not None:
+                room.release()
             raise
         store = cls(path, zarr.open_group(str(path), mode="r+", use_consolidated=False), schema, fingers, streams)
         store._attrs = dict(root_attrs)
         store.n_commits = 1
+        store._room = room
         return store
 
     # ---------------------------------------------------------------- writing
@@ -295,12 +312,16 @@ class RunStore:
             raise RuntimeError(f"run store {self.path} is closed")
 
     def close(self, status: str, **attrs) -> None:
-        """Set ``status`` (one of :data:`STATUSES`), ``end_time`` and ``attrs``; final commit."""
+        """Set ``status`` (one of :data:`STATUSES`), ``end_time`` and ``attrs``; final commit
+        (into the room held since the creation, if any: released first)."""
         if status not in STATUSES:
             raise ValueError(f"status {status!r} not one of {STATUSES}")
         with self._lock:
             if self.closed:
                 return
+            room = self._room
+            if room is not None:
+                room.release()                   # the room kept for these writes (runstore.room)
             self.set_attrs(status=status, end_time=utc_now(), **attrs)
             self.commit()
             self.closed = True

@@ -86,9 +86,15 @@ def _figure(model, activation, result, path):
         ax.set_ylabel("+y (rows)")
     fig.suptitle(f"Tactile frames (bottom view, 8-bit, 0–{model.config.intensity_range[1]:g} kΩ) and dynamic "
                  f"tactile flow (arrows ×{gain:.0f})")
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(f".{path.name}.partial")
+    try:                                   # whole or not at all: an interrupt leaves no half-written PNG
+        fig.savefig(partial, dpi=110, format=path.suffix.lstrip(".") or "png")
+        partial.replace(path)
+    finally:
+        partial.unlink(missing_ok=True)
+        plt.close(fig)
 
 
 if __name__ == "__main__":

@@ -78,30 +78,49 @@ def small_disk(tmp_path):
 
 @pytest.mark.slow
 def test_a_full_disk_stops_the_run_and_keeps_what_was_committed(tmp_path, small_disk):
+    """Issue 34, item 11: the store stayed ``running`` without a ``run.json`` until
+    ``tactile-recover`` was run on a disk with room; the room to close is now held from the start."""
     proc = subprocess.run([*CLI, "protocol=pour_grasp", f"hydra.run.dir={small_disk}/run"], cwd=tmp_path,
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
     (line,) = [x for x in proc.stdout.splitlines() if x.startswith("run ")]
     assert ": failed (recording failed" in line and "No space left on device" in line
-    assert "interlock recording_failed" in line and "tactile-recover" in line
+    assert "interlock recording_failed" in line and "tactile-recover" not in line       # nothing left to recover
     store = small_disk / "run" / "run.zarr"
     tree = xr.open_datatree(store, engine="zarr")             # what was committed opens
     seq = tree["biotac"]["seq"].values
     assert len(seq) > 100 and np.all(np.diff(seq) == 1) and seq[0] == 1
-    assert tree.attrs["status"] == "running"                  # it could not even be closed: recovery's job
+    assert tree.attrs["status"] == "failed" and "No space left on device" in tree.attrs["recorder_error"]
+    assert json.loads((store.parent / "run.json").read_text())["status"] == "failed"
+    assert not list((small_disk / "run").glob(".*room"))       # the room was given back, for the close
+    os.statvfs(small_disk)                                     # the mount is still usable for cleanup
 
-    # tactile-recover on the still-full disk: one line, exit 1, nothing lost; with room, it closes the run
+
+@pytest.mark.slow
+def test_recovering_a_killed_run_on_a_full_disk_uses_the_room_it_kept(tmp_path, small_disk):
+    """A run killed (SIGKILL) leaves its store ``running`` and its room held; with the rest of
+    the disk filled, ``tactile-recover`` frees that room and closes the store ``crashed``."""
+    proc = subprocess.Popen([*CLI, "hardware.realtime=true", f"hydra.run.dir={small_disk}/run"], cwd=tmp_path,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    store = small_disk / "run" / "run.zarr"
+    wait_for_store(small_disk)
+    time.sleep(2.0)
+    proc.kill()
+    proc.wait(30)
+    assert list((small_disk / "run").glob(".*room"))
+    committed = len(xr.open_datatree(store, engine="zarr")["biotac"]["seq"])
+    with open(small_disk / "filler", "wb") as f:               # the rest of the disk
+        try:
+            while True:
+                f.write(b"x" * 65536)
+        except OSError:
+            pass
     from tactile_flow.runstore.recover import main as recover_main
-    rec = subprocess.run([sys.executable, "-c", "from tactile_flow.runstore.recover import main; import sys; sys.exit(main())",
-                          str(store)], capture_output=True, text=True, timeout=120)
-    assert rec.returncode == 1 and "Traceback" not in rec.stderr and len(rec.stderr.strip().splitlines()) == 1
-    assert "could not be written" in rec.stderr and "nothing was lost" in rec.stderr
-    subprocess.run(["mount", "-o", "remount,size=8m", str(small_disk)], check=True)     # the disk has room
     assert recover_main([str(store)]) == 0
     tree = xr.open_datatree(store, engine="zarr")
-    assert tree.attrs["status"] == "crashed" and len(tree["biotac"]["seq"]) == len(seq)
+    assert tree.attrs["status"] == "crashed" and len(tree["biotac"]["seq"]) == committed
     assert json.loads((store.parent / "run.json").read_text())["status"] == "crashed"
-    os.statvfs(small_disk)                                     # the mount is still usable for cleanup
+    assert not list((small_disk / "run").glob(".*room"))
 
 
 @pytest.fixture
@@ -112,15 +131,28 @@ def tiny_disk(tmp_path):
 
 @pytest.mark.slow
 def test_a_run_that_could_not_record_is_never_a_success(tmp_path, tiny_disk):
-    """Issue 13 item 6: a disk full from the start (1 MB) closed the store ``success`` with 0 frames."""
+    """Issue 13 item 6: a disk full from the start (1 MB) closed the store ``success`` with 0
+    frames. Since issue 34 item 11 a run first takes the room to close it: on a disk without it
+    the run is refused before anything is recorded, in one line."""
     proc = subprocess.run([*CLI, f"hydra.run.dir={tiny_disk}/run"], cwd=tmp_path, capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
-    assert "success" not in proc.stdout and ": failed (recording failed" in proc.stdout, proc.stdout
-    tree = xr.open_datatree(tiny_disk / "run" / "run.zarr", engine="zarr")
-    run_json = tiny_disk / "run" / "run.json"
-    if tree.attrs["status"] == "running":               # the disk did not even take the close: recovery's job
-        assert "tactile-recover" in proc.stdout
-    else:
-        assert tree.attrs["status"] == "failed" and "No space left on device" in tree.attrs["recorder_error"]
-    assert not run_json.exists() or json.loads(run_json.read_text())["status"] == "failed"
+    (line,) = [x for x in proc.stderr.splitlines() if x.strip()]
+    assert line.startswith("run failed: no room on the disk of") and "to close the run" in line, line
+    assert "success" not in proc.stdout
+    assert not list(tiny_disk.rglob("run.zarr")) and not list(tiny_disk.rglob("*room"))
+
+
+def test_a_store_whose_electrodes_are_all_saturated_says_so(tmp_path):
+    """Issue 34, item 11: every electrode at 4095 gave "0 valid tactile frame(s)", not why."""
+    from tactile_flow.analysis.load import AnalysisInputError
+    from tactile_flow.analysis.run import analyze_run
+    from tactile_flow.importers.importer import ImportSettings, import_source
+    source = tmp_path / "saturated.csv"
+    source.write_text(",".join(f"e{k}" for k in range(1, 25)) + "\n" + ("4095," * 23 + "4095\n") * 300)
+    (result,) = import_source(source, tmp_path / "imported", ImportSettings(rate_hz=100.0, fingers=["ff"]))
+    with pytest.raises(AnalysisInputError) as err:
+        analyze_run(result.store, {"progress": False, "figures": False}, console=lambda *a: None)
+    message = str(err.value)
+    assert "0 valid tactile frame(s)" in message and "300 frame(s) dropped" in message
+    assert "4095: saturated" in message and len(message.splitlines()) == 1

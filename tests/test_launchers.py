@@ -119,9 +119,10 @@ def test_analysis_sweep_on_joblib_exits_with_the_worst_job_and_tables_every_run(
     proc = command(ANALYZE, "-m", f"run={runs}", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", *QUIET,
                    cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr                  # the bad run's job: bad input
-    assert [line for line in proc.stderr.splitlines() if line.strip()] == \
-        [f"error: {runs / 'broken' / 'run.zarr'}: cannot be read as a run store (JSONDecodeError: "
-         f"Expecting value: line 1 column 1 (char 0))"]
+    error, named = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert error == (f"error: {runs / 'broken' / 'run.zarr'}: cannot be read as a run store (JSONDecodeError: "
+                     f"Expecting value: line 1 column 1 (char 0))")
+    assert named.startswith("job 0 (") and named.endswith("): refused (bad input)")   # the sweep names its job
     rows = table(tmp_path)
     assert [(r["run"], r["result"].split(":")[0]) for r in rows] == [
         (str(runs / "broken" / "run.zarr"), "error"), (str(runs / "one, two" / "run.zarr"), "analysed"),
@@ -182,9 +183,9 @@ def test_simulated_sweep_on_joblib_exits_non_zero_when_a_job_fails(tmp_path):
     proc = command(RUN, "-m", "protocol.steps=[{wait: {duration: 0.2}}],[{wait: {duration: -1}}]", "analyze=false",
                    "progress=false", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2", cwd=tmp_path)
     assert proc.returncode == 2, proc.stderr
-    assert "protocol.steps[0].wait.duration: expected a number > 0" in proc.stderr
+    assert "error: protocol.steps[0].wait.duration: expected a number > 0" in proc.stderr     # not blamed on a file
     (sweep,) = tmp_path.glob("multirun/*/*")
     (job,) = [p.name for p in sweep.iterdir() if p.is_dir()]                             # the bad job left none
     assert job.startswith("0_straws_sweep_on_straws_protocol.steps"), job
     rows = (sweep / "summary.csv").read_text().splitlines()[1:]
-    assert len(rows) == 1 and ",success," in rows[0]
+    assert len(rows) == 2 and ",success," in rows[0] and ",refused (bad input)," in rows[1]   # named, not hidden

@@ -11,11 +11,10 @@ import xarray as xr
 from hydra import compose, initialize_config_dir
 
 from tactile_flow.hardware.errors import ConfigError
-from tactile_flow.protocols.backends import check_hardware
+from tactile_flow.protocols.settings import run_settings
 from tactile_flow.protocols.plan import make_plan
 from tactile_flow.protocols.run import run_protocol
 from tactile_flow.protocols.schema import register
-from tactile_flow.protocols.steps import ProtocolError
 
 register()
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
@@ -27,7 +26,7 @@ def _cfg(*overrides):
         return compose("config", overrides=["analyze=false", "progress=false", *overrides])
 
 
-def refused(*overrides, error=ProtocolError, check=make_plan) -> str:
+def refused(*overrides, error=ConfigError, check=make_plan) -> str:
     with pytest.raises(error) as info:
         check(_cfg(*overrides))
     return str(info.value)
@@ -78,7 +77,7 @@ def test_the_time_limit_is_configurable_and_pours_are_bounded_too():
     ("hardware.buffer_s=1e9", "hardware.buffer_s"), ("hardware.seed=-5", "hardware.seed"),
     ("hardware.seed=100000000000000000000000000", "hardware.seed")])
 def test_the_simulator_step_every_rate_and_the_seed_are_bounded(override, key):
-    msg = refused(override, error=ConfigError, check=check_hardware)
+    msg = refused(override, error=ConfigError, check=run_settings)
     assert msg.startswith(key + ":") and len(msg) < 120, msg
 
 
@@ -88,7 +87,7 @@ def test_the_simulator_step_every_rate_and_the_seed_are_bounded(override, key):
     ("++hardware.scale.buffer_s=1e12", "hardware.scale.buffer_s"),
     ("++hardware.hand.rate_hz=inf", "hardware.hand.rate_hz")])
 def test_the_real_drivers_bound_their_rates_too(override, key):
-    assert refused("hardware=lab", override, error=ConfigError, check=check_hardware).startswith(key + ":")
+    assert refused("hardware=lab", override, error=ConfigError, check=run_settings).startswith(key + ":")
 
 
 def test_numbers_in_messages_are_brief():

@@ -1,6 +1,7 @@
 """Protocols are data: parsing, the plan check before motion, and the run engine on the sim."""
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -159,9 +160,9 @@ def test_operator_stop_retracts_and_aborts():
 def test_parallel_launchers_are_refused_for_real_hardware():
     from tactile_flow.protocols.cli import _refuse_parallel_hardware
     hc = OmegaConf.create({"launcher": {"_target_": "hydra_plugins.hydra_joblib_launcher.JoblibLauncher"}})
-    lab = OmegaConf.create({"hardware": {"backend": "lab"}})
+    lab = SimpleNamespace(backend="lab")                     # as RunSettings say it
     with pytest.raises(ValueError, match="one robot"):
         _refuse_parallel_hardware(lab, hc)
-    _refuse_parallel_hardware(OmegaConf.create({"hardware": {"backend": "sim"}}), hc)   # sim: allowed
+    _refuse_parallel_hardware(SimpleNamespace(backend="sim"), hc)   # sim: allowed
     basic = OmegaConf.create({"launcher": {"_target_": "hydra._internal.core_plugins.basic_launcher.BasicLauncher"}})
     _refuse_parallel_hardware(lab, basic)

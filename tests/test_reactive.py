@@ -72,8 +72,8 @@ def test_live_monitor_is_only_built_when_needed():
 
 
 @pytest.mark.parametrize("override, key", [("live.fingers=[ff,zz]", "live.fingers"),
-                                           ("live.views=[bottom,top]", "live.views"),
-                                           ("live.slip.release_drop=-0.2", "live")])
+                                           ("live.views=[bottom,top]", "live.views[1]"),
+                                           ("live.slip.release_drop=-0.2", "live.slip.release_drop")])
 def test_bad_live_settings_are_refused_by_key(override, key):
     """(Unknown keys never get this far: the run config's schema refuses them at composition.)"""
     from tactile_flow.hardware.errors import ConfigError
@@ -221,7 +221,7 @@ def test_the_operator_line_shows_each_finger_and_the_slip_state():
 
     lines = []
     cfg = LiveConfig(fingers=["ff", "th"], views=["bottom"], console_hz=4.0)
-    model = TactileModel.build(tactile_config({}, cfg.views))
+    model = TactileModel.build(tactile_config(None, cfg.views))
     with make_sim_lab() as lab:
         mon = LiveMonitor(lab.biotac, Rec(), model, cfg, lab.clock, display=lines.append)
         assert mon.line() == "live: taring"
@@ -285,7 +285,7 @@ def test_a_restarted_frame_counter_restarts_the_online_flow_instead_of_blinding_
         return BiotacFrame(seq, t, t, e, z, z, z, np.zeros((1, 2), np.int16))
 
     bt, rec = Biotac(), Rec()
-    mon = LiveMonitor(bt, rec, TactileModel.build(tactile_config({}, ["bottom"])), LiveConfig(views=["bottom"]),
+    mon = LiveMonitor(bt, rec, TactileModel.build(tactile_config(None, ["bottom"])), LiveConfig(views=["bottom"]),
                       Clock())
     for i in range(50):
         bt.the_tap.put(frame(1000 + i, i * 0.01))

@@ -144,3 +144,55 @@ def test_bad_rosbridge_config_names_the_key():
         RosbridgeConfig(connect_timeout_s=0)
     with pytest.raises(ConfigError, match=r"hardware.biotac.fingers\[0\]"):
         RosbridgeBiotacConfig(fingers=("index",))
+
+
+@pytest.mark.parametrize("mode, reason", [("garbage", "tactiles: not a list of the fingers' readings"),
+                                          ("overflow", "ff electrodes: out of range"),
+                                          ("missing", "pdc: missing")])
+def test_malformed_biotac_frames_are_refused_counted_and_the_stream_goes_on(emu, mode, reason):
+    """Issue 34, item 9: an electrode at 70000 raised an OverflowError in roslibpy's thread
+    (260 tracebacks in a run's log, the frames uncounted); a garbage ``tactiles`` was counted
+    but never reported. Now every one is refused at the driver, counted by reason and the last
+    one kept; the good frames around them keep coming."""
+    with _biotacs(emu.url) as bt:
+        bt.read()
+        before = emu.stats()["corrupted"]
+        emu.command(f"corrupt {mode} 40")
+        end = time.monotonic() + 10                           # 0.4 s at 100 Hz; a loaded machine, longer
+        while (emu.stats()["corrupted"] - before < 40 or bt.malformed < 40) and time.monotonic() < end:
+            time.sleep(0.1)
+        sent = emu.stats()["corrupted"] - before
+        report = bt.wire_report()
+        assert sent == 40 and report["refused"] == bt.malformed == 40
+        assert report["reasons"] == {reason: 40} and report["last"]
+        bt.read()
+        time.sleep(0.5)
+        frames = bt.read()                                                     # the good ones still arrive
+        assert len(frames) >= 25 and all(f.is_valid() for f in frames)
+        bt.check_link()                                                        # the link itself is up
+
+
+def test_a_malformed_joint_state_is_refused_and_counted(emu):
+    with ShadowHand(ShadowHandConfig(RosbridgeConfig(emu.url))) as hand:
+        hand._on_state({"name": ["rh_FFJ3"], "position": ["nan"]})
+        hand._on_state({"name": ["rh_FFJ3"], "position": [0.1, 0.2]})
+        hand._on_state("garbage")
+        assert hand.wire_report()["refused"] == 3 and not np.isnan(hand.positions()["rh_FFJ3"])
+
+
+def test_one_devices_link_dropped_is_that_devices_error_at_once(emu):
+    """``disconnect TOPIC`` closes the websocket of the device subscribed to it (its own link)."""
+    with _biotacs(emu.url) as bt, ShadowHand(ShadowHandConfig(RosbridgeConfig(emu.url))) as hand:
+        bt.check_link()
+        emu.command("disconnect /rh/tactile")
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 2.0:
+            try:
+                bt.check_link()
+            except DeviceDisconnectedError:
+                break
+            time.sleep(0.005)
+        else:
+            pytest.fail("the BioTacs' lost link was not noticed within 2 s")
+        assert time.monotonic() - t0 < 0.5
+        hand.check_link()                                                      # the hand's own link is up

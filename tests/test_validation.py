@@ -12,7 +12,8 @@ from hydra import compose, initialize_config_dir
 from tactile_flow.analysis.config import AnalysisConfigError, load_config as load_analysis
 from tactile_flow.hardware.config import SimConfig, load_config as load_hardware
 from tactile_flow.protocols.plan import make_plan
-from tactile_flow.protocols.schema import check_config, register
+from tactile_flow.protocols.schema import register
+from tactile_flow.protocols.settings import run_settings
 from tactile_flow.protocols.steps import STEP_KINDS, Pour, ProtocolError, parse_steps
 from tactile_flow.validation import ConfigError, build, spec, suggest, unknown_key
 
@@ -106,7 +107,7 @@ def test_steps_refuse_unknown_kinds_and_parameters_with_the_nearest():
 def test_keys_added_with_plus_are_refused_after_composition(override, key, near):
     cfg = _cfg(override)
     with pytest.raises(ConfigError) as e:
-        check_config(cfg)
+        run_settings(cfg)
     if key:
         assert e.value.key == key and f"did you mean `{near}`?" in str(e.value)
 

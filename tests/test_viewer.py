@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from conftest import DATA
 from tactile_flow.hardware.transforms import rotvec_to_quaternion
 
 pytest.importorskip("rerun")
@@ -226,24 +227,92 @@ def test_the_live_viewer_shows_every_frame_the_monitor_processed(pour):
     assert [s for (s,) in rec.values("/live/slip", "StateChange:state")] == ["watching", "slip"]
 
 
-@pytest.mark.slow
-def test_web_serves_the_viewer_until_stopped(straws):
+def _listening_on(port: int) -> set[str]:
+    """The local addresses with a TCP socket listening on ``port`` (/proc/net/tcp and tcp6)."""
+    found = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            local, state = line.split()[1], line.split()[3]
+            address, hexport = local.rsplit(":", 1)
+            if state == "0A" and int(hexport, 16) == port:             # 0A: LISTEN
+                found.add({"0100007F": "127.0.0.1", "00000000": "0.0.0.0"}.get(address, address))
+    return found
+
+
+def _serve(run_dir, *args):
     import socket
-    import urllib.request
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    proc = subprocess.Popen([sys.executable, "-c", "import sys; from tactile_flow.viewer.cli import main; sys.exit(main(sys.argv[1:]))",
-                             str(straws["dir"]), "--web", "--port", str(port)], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-c", "import sys; from tactile_flow.viewer.cli import main; "
+                             "sys.exit(main(sys.argv[1:]))", str(run_dir), "--web", "--port", str(port), *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return proc, port
+
+
+@pytest.mark.slow
+def test_web_serves_the_viewer_on_this_machine_only_until_stopped(straws):
+    """Issue 34, item 4: the web viewer and its gRPC proxy listen on loopback (they listened on
+    every interface, 0.0.0.0); Ctrl-C stops serving, exit 0, nothing on stderr."""
+    import re
+    import signal
+    import urllib.request
+    proc, port = _serve(straws["dir"])
     try:
         line = proc.stdout.readline()                          # printed once everything is sent
-        assert f"http://localhost:{port}" in line and "Ctrl-C" in line
+        assert f"http://127.0.0.1:{port}/?url=" in line and "Ctrl-C" in line, line + proc.stderr.read()
+        grpc = int(re.search(r"%3A(\d+)%2Fproxy", line).group(1))
+        assert _listening_on(port) == {"127.0.0.1"} and _listening_on(grpc) == {"127.0.0.1"}
         with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10) as page:
             assert page.status == 200 and b"Rerun" in page.read()
         assert proc.poll() is None                             # still serving
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(30) == 0 and proc.stderr.read() == ""
+        assert _listening_on(port) == set() and _listening_on(grpc) == set()     # its server is gone too
+    finally:
+        proc.kill()
+        proc.wait(30)
+
+
+@pytest.mark.slow
+def test_web_on_every_interface_only_when_asked_and_with_a_warning(straws):
+    proc, port = _serve(straws["dir"], "--bind", "0.0.0.0")
+    try:
+        assert "Ctrl-C" in proc.stdout.readline()
+        assert _listening_on(port) == {"0.0.0.0"}
     finally:
         proc.terminate()
         proc.wait(30)
+    (warning,) = [x for x in proc.stderr.read().splitlines() if x.strip()]
+    assert warning.startswith("tactile-view: warning: serving on every network interface") and "127.0.0.1" in warning
+
+
+@pytest.mark.slow
+def test_an_imported_and_analysed_run_replays_without_a_rerun_warning(tmp_path):
+    """Issue 34, item 13: Rerun warned (with a line of our source) that three segment colours
+    were ambiguous (packed colours or one RGB?): every Rerun warning is an error here."""
+    import csv
+    import warnings
+
+    from rerun.error_utils import RerunWarning
+
+    from tactile_flow.analysis.run import analyze_run
+    from tactile_flow.importers.importer import ImportSettings, import_source
+    with open(DATA / "biotac_sp_grasps" / "palm_down_test.csv") as f:
+        grasps = np.array([[float(x) for x in row[2:]] for row in list(csv.reader(f))[1:]])
+    rest, rng = np.percentile(grasps, 99, axis=0), np.random.default_rng(0)
+    frames = [*(rest + rng.normal(0, 3, rest.shape) for _ in range(150)), *grasps[:60],
+              *(rest + rng.normal(0, 3, rest.shape) for _ in range(150))]
+    names = [f"{f}_e{k}" for f in ("ff", "mf", "th") for k in range(1, 25)]
+    source = tmp_path / "press.csv"
+    source.write_text(",".join(names) + "\n" + "".join(",".join(str(int(np.clip(v, 1, 4095))) for v in row) + "\n"
+                                                      for row in frames))
+    (result,) = import_source(source, tmp_path / "imported", ImportSettings(rate_hz=100.0))
+    summary = analyze_run(result.store, {"progress": False, "figures": False}, console=lambda *a: None)
+    assert summary["segments"], "the press must be segmented (the colours of three labels are what warned)"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RerunWarning)
+        assert tactile_view([result.run_dir, "--save", str(tmp_path / "view.rrd")]) == 0
 
 
 # ----------------------------------------------------------------------------- the live viewer's queue

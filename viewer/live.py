@@ -33,10 +33,11 @@ from pathlib import Path
 import numpy as np
 
 from . import INSTALL_HINT, TIMELINE, draw
+from .serve import NATIVE_PORT, spawn_native_viewer
 
 QUEUE_ITEMS = 256        # engine periods of backlog (2.56 s at 100 Hz) before rows are dropped
 DRAIN_S = 0.1            # the viewer's thread sends what is queued 10 times a second (its CPU: a few %)
-PORT = 9876              # the native viewer's gRPC port (Rerun's default)
+PORT = NATIVE_PORT       # the native viewer's gRPC port (Rerun's default)
 LIVE_ARROW_GAIN = 20.0   # px drawn per px/frame: a slip (≥ 0.1 px/frame) shows, sensor noise hardly
 LIVE_FILE = "live.rrd"
 
@@ -77,7 +78,7 @@ class LiveViewer:
         self.display = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
         self.warning = None
         if self.display and spawn:
-            rr.spawn(port=PORT, connect=False)
+            spawn_native_viewer(PORT)              # on loopback only (Rerun's own spawn listens everywhere)
             sinks.insert(0, rr.GrpcSink(f"rerun+http://127.0.0.1:{PORT}/proxy"))
         elif not self.display:
             self.warning = (f"live.viewer=rerun: no display ($DISPLAY unset), so no viewer window; the live view "

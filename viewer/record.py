@@ -143,8 +143,8 @@ def send_states(rec, scene: Scene) -> None:
         if not segs:
             continue
         labels = list(dict.fromkeys(s["label"] for s in segs))
-        rec.log(f"segments/{f}", rr.StateConfiguration(values=labels, colors=[draw.hex_rgba(COLOURS.get(x, "#eeeeee"))
-                                                                                for x in labels]), static=True)
+        colours = np.array([draw.hex_rgba(COLOURS.get(x, "#eeeeee")) for x in labels], dtype=np.uint32)   # packed
+        rec.log(f"segments/{f}", rr.StateConfiguration(values=labels, colors=colours), static=True)
         for i, s in enumerate(segs):
             rec.set_time(TIMELINE, duration=float(s["start_s"]))
             rec.log(f"segments/{f}", rr.StateChange(state=s["label"]))

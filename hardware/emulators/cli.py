@@ -34,11 +34,33 @@ def _ur_emulator(host: str, home_pose, pose_file: str | None = None):
     return URControllerProcess(host, initial_pose=tuple(home_pose), pose_file=pose_file)
 
 
-def remove_links(link_dir) -> None:
-    """Remove what the emulated lab left in ``link_dir`` (its pty links and the world's shared
-    files), and the directory if that leaves it empty."""
+def write_board(link_dir, surface: str) -> None:
+    """Say in ``link_dir`` which board the emulated BioTacs press on (``tactile-run
+    hardware=lab_emulated`` warns when its protocol's board is another one)."""
+    import json
+
+    from tactile_flow.hardware.lab import EMULATOR_FILE
+    from tactile_flow.validation import to_plain
+    board = None
+    if surface != "none":
+        import yaml
+
+        from tactile_flow.hardware.surfaces import load_surface
+        from .touch import SURFACES_DIR
+        board = to_plain(load_surface(yaml.safe_load((SURFACES_DIR / f"{surface}.yaml").read_text())).cfg)
     d = Path(link_dir)
-    for name in ("biotac", "pump", "scale", *WORLD_FILES):
+    d.mkdir(parents=True, exist_ok=True)
+    tmp = d / f".{EMULATOR_FILE}.{os.getpid()}"
+    tmp.write_text(json.dumps({"surface_name": surface, "surface": board}) + "\n")
+    os.replace(tmp, d / EMULATOR_FILE)
+
+
+def remove_links(link_dir) -> None:
+    """Remove what the emulated lab left in ``link_dir`` (its pty links, the world's shared
+    files and the board it emulates), and the directory if that leaves it empty."""
+    from tactile_flow.hardware.lab import EMULATOR_FILE
+    d = Path(link_dir)
+    for name in ("biotac", "pump", "scale", *WORLD_FILES, EMULATOR_FILE):
         p = d / name
         if p.is_symlink() or p.is_file():
             p.unlink()
@@ -61,7 +83,8 @@ EPILOG = """exit status: 0 stopped by Ctrl-C or SIGTERM, 1 an emulator exited or
 2 bad option (one line)."""
 
 
-def main(argv=None) -> int:
+def build_parser():
+    """``tactile-emulate``'s options."""
     from tactile_flow.validation.cli import ArgumentParser
     parser = ArgumentParser(prog="tactile-emulate", description=__doc__.replace("``", "").split("\n\nEvery")[0],
                             epilog=EPILOG)
@@ -77,6 +100,11 @@ def main(argv=None) -> int:
     parser.add_argument("--pump-max-rate", type=float, default=PUMP_MAX_RATE_ML_MIN,
                         help=f"the emulated pump's fastest flow, ml/min (default {PUMP_MAX_RATE_ML_MIN:g}, "
                              "hardware.pump.max_rate_ml_min of lab_emulated.yaml: rehearse pours faster)")
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     surfaces = sorted(p.stem for p in (CONF_DIR / "surface").glob("*.yaml"))
     if args.surface != "none" and args.surface not in surfaces:
@@ -107,6 +135,7 @@ def main(argv=None) -> int:
         started.append(serial)
         for name in ("biotac", "pump", "scale"):
             print(f"{name:<15} {Path(args.link_dir) / name} -> {serial.ports[name]}")
+        write_board(args.link_dir, args.surface)
         print(f"board           {args.surface}" + ("" if args.surface == "none" or pose_file is None else
                                                    "  (the BioTacs press on it following the arm: run protocols "
                                                    f"with surface={args.surface})"))

@@ -18,9 +18,14 @@ roslibpy client uses — ``advertise``/``unadvertise``, ``publish``, ``subscribe
   that point's ``time_from_start`` (linear in time); with the world the trajectory is shared
   (``<world dir>/hand``) so the serial BioTac emulator's world grips as this one does.
 
-Control lines on stdin: ``pause``/``resume`` publishing (a hung driver), ``stats`` (with the
-world's bottle and the monotonic receipt time of every hand command), ``frames A B`` (the
-monotonic times the BiotacAll messages ``A``..``B`` were sent).
+Control lines on stdin (each answered by one ``OK <json>`` or ``ERR <reason>`` line):
+``pause``/``resume`` publishing (a hung driver), ``stats`` (with the world's bottle and the
+monotonic receipt time of every hand command), ``frames A B`` (the monotonic times the
+BiotacAll messages ``A``..``B`` were sent), and the faults a real link can show:
+``corrupt MODE N`` (the next N ``BiotacAll`` messages malformed: ``garbage``, a
+``tactiles`` field that is not a list; ``overflow``, an electrode at 70000, beyond any 16-bit
+count; ``missing``, the first finger without its ``pdc``), ``disconnect TOPIC`` (close the
+websocket of every client subscribed to ``TOPIC``: the link of that one device lost).
 """
 
 from __future__ import annotations
@@ -42,6 +47,19 @@ from .touch import frame_times, trajectory_positions
 CATCH_UP_S = 1.0       # a late loop sends the frames it missed up to this far back (s)
 
 UNCONNECTED = {"pac0": 0, "pac1": 0, "pac": [], "pdc": -22072, "tac": 32570, "tdc": 0, "electrodes": [0] * 24}
+CORRUPTIONS = ("garbage", "overflow", "missing")
+
+
+def corrupted(msg: dict, mode: str) -> dict:
+    """``msg`` (a BiotacAll) made malformed as ``mode`` says (see the module doc)."""
+    if mode == "garbage":
+        return {**msg, "tactiles": "garbage"}
+    tactiles = [dict(t) for t in msg["tactiles"]]
+    if mode == "overflow":
+        tactiles[0]["electrodes"] = [*tactiles[0]["electrodes"][:6], 70000, *tactiles[0]["electrodes"][7:]]
+    else:
+        tactiles[0].pop("pdc")
+    return {**msg, "tactiles": tactiles}
 TOPIC_TYPES = {"/rh/tactile": "sr_robot_msgs/BiotacAll", "/joint_states": "sensor_msgs/JointState",
                "/rh_trajectory_controller/command": "trajectory_msgs/JointTrajectory"}
 
@@ -142,6 +160,7 @@ class Bridge:
         self.paused = False
         self.published = {"/rh/tactile": 0, "/joint_states": 0}
         self.js_seq = 0
+        self.corrupt_mode, self.corrupt_left, self.corrupted = None, 0, 0
 
     def handle(self, client, msg: dict) -> None:
         op = msg.get("op")
@@ -176,6 +195,10 @@ class Bridge:
         now = mono if now is None else now
         wall = time.time() - (mono - now)
         msg = self.biotacs.message(wall, now)
+        if self.corrupt_left > 0:
+            msg = corrupted(msg, self.corrupt_mode)
+            self.corrupt_left -= 1
+            self.corrupted += 1
         self.biotacs.sent.append(time.monotonic())
         self._publish("/rh/tactile", msg)
         self.js_seq += 1
@@ -199,16 +222,29 @@ class Bridge:
         if cmd in ("pause", "resume"):
             self.paused = cmd == "pause"
             return f"OK {json.dumps({'paused': self.paused})}"
+        words = cmd.split()
+        if words[:1] == ["corrupt"]:
+            if len(words) != 3 or words[1] not in CORRUPTIONS or not words[2].isdigit():
+                return f"ERR expected corrupt {'|'.join(CORRUPTIONS)} N"
+            self.corrupt_mode, self.corrupt_left = words[1], int(words[2])
+            return f"OK {json.dumps({'corrupt': words[1], 'frames': int(words[2])})}"
+        if words[:1] == ["disconnect"] and len(words) == 2:
+            dropped = [c for c in list(self.clients) if words[1] in c.subscriptions]
+            for c in dropped:
+                self.clients.discard(c)
+                c.dropConnection(abort=True)          # as a cable pulled: no closing handshake
+            return f"OK {json.dumps({'disconnected': len(dropped)})}"
         if cmd == "stats":
             return "OK " + json.dumps({"published": self.published, "clients": len(self.clients),
+                                       "corrupted": self.corrupted,
                                        "hand_commands": self.hand.commands, "biotac_seq": self.biotacs.seq,
                                        "hand_command_times": self.hand.received,
                                        "positions": dict(zip(JOINT_NAMES, self.hand.positions(time.monotonic()).round(4).tolist())),
                                        "world": None if self.world is None else self.world.state()})
-        words = cmd.split()
         if len(words) == 3 and words[0] == "frames" and all(w.isdigit() for w in words[1:]):
             return "OK " + json.dumps(frame_times(self.biotacs.sent, int(words[1]), int(words[2])))
-        return f"ERR unknown command {cmd!r}; expected pause, resume, stats, frames A B"
+        return (f"ERR unknown command {cmd!r}; expected pause, resume, stats, frames A B, corrupt MODE N, "
+                f"disconnect TOPIC")
 
 
 def make_protocol(bridge: Bridge):

@@ -67,6 +67,9 @@ class _SimDevice:
         return (f"{self.kind}: link lost at t={t} s (fault injected by "
                 f"hardware.faults.disconnect.{self.kind})")
 
+    def check_link(self) -> None:
+        self._require_connected()
+
     def _require_connected(self) -> None:
         if self.kind in self.world.lost:
             raise DeviceDisconnectedError(self._lost_message())
