@@ -11,6 +11,7 @@ a sensor without a pressure channel records none.
 
 from __future__ import annotations
 
+import threading
 from abc import abstractmethod
 from dataclasses import dataclass
 from functools import cached_property, partial
@@ -146,7 +147,25 @@ def pac_columns(frames, previous: float | None = None, rate_hz: float = PAC_RATE
 
 class FrameTap(SampleBuffer):
     """A second, independent copy of a sensor's frame stream (see :meth:`TactileSensors.tap`):
-    the newest ``maxlen`` frames, the ones it had to drop counted in ``overflows``."""
+    the newest ``maxlen`` frames, the ones it had to drop counted in ``overflows``.
+    :meth:`wait` lets a consumer on the wall clock wake the moment a frame arrives."""
+
+    def __init__(self, maxlen: int):
+        super().__init__(maxlen)
+        self._arrived = threading.Event()
+
+    def put(self, sample) -> None:
+        super().put(sample)
+        self._arrived.set()
+
+    def drain(self) -> list:
+        self._arrived.clear()                 # before draining: a frame put meanwhile sets it again
+        return super().drain()
+
+    def wait(self, timeout_s: float) -> bool:
+        """Block until a frame has arrived since the last :meth:`drain` (True), or ``timeout_s``
+        s of wall time have passed (False)."""
+        return self._arrived.wait(timeout_s)
 
 
 class TactileSensors(Device):

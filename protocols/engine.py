@@ -85,7 +85,10 @@ class RunContext(Geometry):
         """Advance one poll period; raise :class:`RunAborted` on a stop request and
         :class:`~protocols.interlocks.InterlockTripped` when a safety limit is breached."""
         t0 = self.clock.now()
-        self.clock.sleep(self.poll)
+        if self.live is not None and self.live.wakes:   # wall clock: poll the moment a frame is in
+            self.live.wait_frame(self.poll)
+        else:
+            self.clock.sleep(self.poll)
         self.interrupts.raise_deferred()          # a second Ctrl-C that a finaliser dropped
         self.recorder.keep_up()                   # a simulated clock waits for the store to keep up
         if self.progress:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import sys
+import time
 from dataclasses import dataclass, field, fields, replace
 from typing import Optional
 
@@ -154,6 +155,11 @@ class LiveMonitor:
         self._step = None                               # the newest OnlineStep
         self._newest_seq = None                         # highest frame number seen
         self._behind = 0                                # frames in a row numbered below it
+        self._timing = np.zeros((2, 3))                 # flow, detector: total s, max s, frames
+        self._device_offset = math.inf                  # run time − device time, least over the frames
+        from tactile_flow.hardware.device import WallClock
+        self.wakes = isinstance(clock, WallClock)       # the engine may wait for frames (wait_frame)
+        self.detection = None                           # the stages of the newest detection's frame
 
     # ------------------------------------------------------------------ lifecycle
     def begin(self) -> None:
@@ -173,6 +179,11 @@ class LiveMonitor:
                "tap_overflows": self.tap.overflows, "slip": dict(vars(self.detector.config))}
         if self.flow is not None:
             out["counters"] = self.flow.counters()
+        if self._timing[0, 2]:
+            out["timing_ms"] = {k: {"mean": round(1e3 * tot / n, 4), "max": round(1e3 * mx, 4)}
+                                for k, (tot, mx, n) in zip(("flow", "detector"), self._timing)}
+        if self.detection is not None:
+            out["detection"] = self.detection
         if self.viewer is not None:
             out["viewer"] = self.viewer.close()
             if out["viewer"].get("rows_dropped"):
@@ -185,6 +196,23 @@ class LiveMonitor:
             self.viewer.event(self.recorder.now(), kind, name, detail)
 
     # ------------------------------------------------------------------ per period
+    def wait_frame(self, timeout_s: float) -> bool:
+        """On the wall clock: block until a frame has arrived since the last :meth:`poll` (True)
+        or ``timeout_s`` s have passed (False), so the engine polls as soon as a frame is in."""
+        return self.tap.wait(timeout_s)
+
+    def frame_time(self, fr, received: float) -> float:
+        """The frame's time on the run's axis (s) as the sensor's own clock dates it: its device
+        time plus the least (receipt − device time) seen so far, so never after its receipt
+        ``received``. The online flow and the detector pace themselves by it (trends, noise,
+        pauses longer than ``max_gap_s``): frames delayed or bunched on the wire are then not
+        a pause of the sensor. A device time that is not finite leaves the receipt time."""
+        d = fr.device_time
+        if not math.isfinite(d):
+            return received
+        self._device_offset = min(self._device_offset, received - d)
+        return d + self._device_offset
+
     def poll(self, still: bool | None = None):
         """Process every frame received since the last call; returns the detector's state."""
         if still is not None:
@@ -215,13 +243,25 @@ class LiveMonitor:
         t0 = self.recorder.t0
         for i, fr in enumerate(frames):
             t = fr.host_time - t0
-            self._follow_restarts(fr.seq)
-            step = self._step = self.flow.push(fr.seq, t, fr.electrodes[self.rows])
+            if self._follow_restarts(fr.seq):
+                self._device_offset = math.inf
+            t_frame = self.frame_time(fr, t)
+            first = self.detector.state.first
+            c0 = time.perf_counter()
+            step = self._step = self.flow.push(fr.seq, t_frame, fr.electrodes[self.rows])
+            c1 = time.perf_counter()
             mean = np.stack([step.mean_col, step.mean_row], axis=-1)
-            state = self.detector.update(t, step.processed, step.activation_total, mean, step.curl,
+            state = self.detector.update(t_frame, step.processed, step.activation_total, mean, step.curl,
                                          step.confidence, still=self.still)
+            c2 = time.perf_counter()
             cols["time_live"][i], cols["seq"][i] = t, fr.seq
             cols["processed_time"][i] = self.clock.now() - t0
+            self._time(c1 - c0, c2 - c1)
+            if state.first is not None and state.first is not first:
+                self.detection = {"seq": int(fr.seq), "received_s": round(t, 6),
+                                  "processed_s": round(float(cols["processed_time"][i]), 6),
+                                  "flow_ms": round(1e3 * (c1 - c0), 4), "detector_ms": round(1e3 * (c2 - c1), 4),
+                                  "waited_ms": round(1e3 * (cols["processed_time"][i] - t) - 1e3 * (c2 - c0), 4)}
             cols["processed"][i], cols["activation_total"][i] = step.processed, step.activation_total
             for k, name in (("flow_col", "mean_col"), ("flow_row", "mean_row"), ("magnitude", "magnitude"),
                             ("direction", "direction"), ("divergence", "divergence"), ("curl", "curl"),
@@ -232,20 +272,31 @@ class LiveMonitor:
             self.frames += 1
         return cols
 
-    def _follow_restarts(self, seq: int) -> None:
+    def _time(self, flow_s: float, detector_s: float) -> None:
+        for k, dt in enumerate((flow_s, detector_s)):
+            row = self._timing[k]
+            row[0] += dt
+            row[1] = max(row[1], dt)
+            row[2] += 1
+
+    def _follow_restarts(self, seq: int) -> bool:
         """A sensor whose frame counter restarted (a reconnected bridge) would otherwise be
         skipped as late for good: after :data:`RESTART_FRAMES` frames in a row numbered below
-        the newest seen, start the online pipeline and the detector afresh."""
+        the newest seen, start the online pipeline and the detector afresh (returns True)."""
         if self._newest_seq is not None and seq <= self._newest_seq:
             self._behind += 1
             if self._behind < RESTART_FRAMES:
-                return
+                return False
             self.flow.reset()
             for f in range(len(self.fingers)):
                 self.detector.reset(f)
             self.recorder.event("info", "live", {"message": f"BioTac frame counter restarted (seq {seq} after "
                                                             f"{self._newest_seq}): online flow restarted"})
+            restarted = True
+        else:
+            restarted = False
         self._newest_seq, self._behind = seq, 0
+        return restarted
 
     # ------------------------------------------------------------------ operator
     def line(self) -> str:

@@ -53,7 +53,7 @@ def press_record(sensor, seconds: float = 6.0, seed: int = 0) -> Record:
         depth = 1.0e-3 * s - 2e-3 * (s == 0)
         pose = np.r_[0.3 + slide, 0.0, top - depth - pole[2], np.pi, 0.0, 0.0]
         moving = 1.5 <= t <= 4.0
-        world.touch(t, pose, np.r_[8e-3 / 2.5 if moving else 0.0, 0.0, 0.0])
+        world.follow(t, 1.0 / RATE_HZ, pose, np.r_[8e-3 / 2.5 if moving else 0.0, 0.0, 0.0])
         c = [world.contacts[f] for f in fingers]
         inputs = SensorInputs(np.array([x.load for x in c]), np.array([x.force for x in c]),
                               np.array([world.force_rate[f] for f in fingers]), np.array([x.friction for x in c]),

@@ -129,6 +129,7 @@ TESTED: dict[str, object] = {
     'python benchmarks/bench_recorder.py --sim-s 20 --repeat 3': BENCH,
     'python benchmarks/bench_sim.py': BENCH,
     'python benchmarks/bench_slip.py': BENCH,
+    'python benchmarks/bench_reflex.py': BENCH,
     'python benchmarks/bench_slip_direction.py': BENCH,
     'python benchmarks/bench_slip_direction.py --grid classic': BENCH,
     'python benchmarks/bench_slip_direction.py --grid varied': BENCH,
@@ -270,6 +271,8 @@ TESTED: dict[str, object] = {
         "tests/test_lab_emulated.py::test_a_rehearsal_on_tactile_emulate_presses_finds_segments_and_leaves_no_links",
     'tactile-run hardware=lab_emulated ...':
         "tests/test_lab_emulated.py::test_a_rehearsal_on_tactile_emulate_presses_finds_segments_and_leaves_no_links",
+    'tactile-run hardware=lab_emulated protocol=pour_grasp_reactive protocol.pour_rate=600':
+        "tests/test_lab_emulated.py::test_the_emulated_reactive_pour_catches_the_slip_and_holds_the_bottle",
     'tactile-run live.viewer=rerun': "tests/test_viewer.py::test_the_live_viewer_shows_every_frame_the_monitor_processed",
     'tactile-run progress=false': "tests/test_cli.py::test_default_run_leaves_a_complete_store",
     'tactile-run protocol.sweep_speed=20 hardware.seed=3': HERE,

@@ -313,6 +313,7 @@ def test_first_session_commands_exist(command):
 
 @pytest.mark.parametrize("command", [
     "tactile-run hardware=lab_emulated",
+    "tactile-run hardware=lab_emulated protocol=pour_grasp_reactive protocol.pour_rate=600",
     "tactile-run 'hydra.searchpath=[file://./my_conf]' hardware=our_lab plan_only=true",
     "tactile-run 'hydra.searchpath=[file://./examples/conf]' protocol=first_touch hardware=lab plan_only=true",
     "tactile-run 'hydra.searchpath=[file://./examples/conf]' protocol=first_touch hardware=lab",

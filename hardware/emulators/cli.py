@@ -18,9 +18,11 @@ from pathlib import Path
 
 from tactile_flow.conf import DIR as CONF_DIR
 
+from .touch import POSE_FILE, WORLD_FILES
+
 HOME_POSE = (0.3, 0.0, 0.2, 3.141592653589793, 0.0, 0.0)    # hardware.arm.home_pose of conf/hardware/lab.yaml
 DEFAULT_LINK_DIR = os.environ.get("TACTILE_EMULATE_DIR", "/tmp/tactile-emulate")
-POSE_FILE = "tcp_pose"          # the arm emulator's TCP pose, read by the BioTac emulators (touch.py)
+PUMP_MAX_RATE_ML_MIN = 600.0    # conf/hardware/lab_emulated.yaml: a rehearsal pours faster than the real pump
 
 
 def _ur_emulator(host: str, home_pose, pose_file: str | None = None):
@@ -54,11 +56,11 @@ def write_board(link_dir, surface: str) -> None:
 
 
 def remove_links(link_dir) -> None:
-    """Remove what the emulated lab left in ``link_dir`` (its pty links, the pose file and
-    the board it emulates), and the directory if that leaves it empty."""
+    """Remove what the emulated lab left in ``link_dir`` (its pty links, the world's shared
+    files and the board it emulates), and the directory if that leaves it empty."""
     from tactile_flow.hardware.lab import EMULATOR_FILE
     d = Path(link_dir)
-    for name in ("biotac", "pump", "scale", POSE_FILE, EMULATOR_FILE):
+    for name in ("biotac", "pump", "scale", *WORLD_FILES, EMULATOR_FILE):
         p = d / name
         if p.is_symlink() or p.is_file():
             p.unlink()
@@ -94,10 +96,13 @@ def build_parser():
     parser.add_argument("--seed", type=int, default=0, help="seed of the emulated sensors' noise (default 0)")
     parser.add_argument("--surface", default="straws",
                         help="the board the emulated BioTacs press on, following the emulated arm "
-                             "(conf/surface/NAME.yaml; the protocol's surface; 'none': resting counts only)")
+                             "(conf/surface/NAME.yaml; the protocol's surface; 'none': no board)")
     parser.add_argument("--sensor", default="biotac_sp",
                         help="the emulated BioTacs' sensor model: biotac_sp (default), biotac (classic, 19 "
                              "electrodes) or a sensor .yaml; run protocols with the same sensor=")
+    parser.add_argument("--pump-max-rate", type=float, default=PUMP_MAX_RATE_ML_MIN,
+                        help=f"the emulated pump's fastest flow, ml/min (default {PUMP_MAX_RATE_ML_MIN:g}, "
+                             "hardware.pump.max_rate_ml_min of lab_emulated.yaml: rehearse pours faster)")
     return parser
 
 
@@ -114,11 +119,10 @@ def main(argv=None) -> int:
     from .serial_devices import SerialDevicesEmulator
 
     started = []
-    pose_file = None
-    if args.surface != "none" and not args.no_ur:
-        from .touch import PoseFile
-        pose_file = str(Path(args.link_dir) / POSE_FILE)
-        PoseFile(pose_file, create=True).close()
+    # the world the BioTacs feel: the board under the arm, the bottle in the hand, filled by the pump
+    world_dir = str(args.link_dir)
+    pose_file = None if args.no_ur else str(Path(world_dir) / POSE_FILE)
+    Path(world_dir).mkdir(parents=True, exist_ok=True)
     try:
         ur = None if args.no_ur else _ur_emulator(args.host, HOME_POSE, pose_file)
         if ur is not None:
@@ -126,20 +130,23 @@ def main(argv=None) -> int:
             print(f"UR controller   {args.host}  (RTDE 30004, dashboard 29999, script 30003)")
         elif not args.no_ur:
             print("UR controller   not available (hardware/emulators/ur_controller.py missing)")
-        ros = RosbridgeEmulator(host="127.0.0.1", port=args.rosbridge_port, seed=args.seed, pose_file=pose_file,
+        ros = RosbridgeEmulator(host="127.0.0.1", port=args.rosbridge_port, seed=args.seed, world_dir=world_dir,
                                 surface=args.surface, sensor=args.sensor).start()
         started.append(ros)
         print(f"rosbridge       {ros.url}  (/rh/tactile at 100 Hz, /joint_states, "
               f"/rh_trajectory_controller/command)")
-        serial = SerialDevicesEmulator(link_dir=args.link_dir, seed=args.seed, pose_file=pose_file,
-                                       surface=args.surface, sensor=args.sensor).start()
+        serial = SerialDevicesEmulator(link_dir=args.link_dir, seed=args.seed, world_dir=world_dir,
+                                       surface=args.surface, pump_max_rate_ml_min=args.pump_max_rate,
+                                       sensor=args.sensor).start()
         started.append(serial)
         for name in ("biotac", "pump", "scale"):
             print(f"{name:<15} {Path(args.link_dir) / name} -> {serial.ports[name]}")
         write_board(args.link_dir, args.surface)
-        print(f"board           {args.surface}" + ("  (no contact: the BioTacs rest)" if pose_file is None else
+        print(f"board           {args.surface}" + ("" if args.surface == "none" or pose_file is None else
                                                    "  (the BioTacs press on it following the arm: run protocols "
                                                    f"with surface={args.surface})"))
+        print("bottle          between ff, mf and th: held when the hand closes on it, filled by the pump, "
+              "slipping as in the simulated lab")
         env = "" if args.link_dir == "/tmp/tactile-emulate" else f"TACTILE_EMULATE_DIR={args.link_dir} "
         print(f"sensor          {args.sensor}")
         print(f"\nIn another terminal:  {env}tactile-run hardware=lab_emulated"

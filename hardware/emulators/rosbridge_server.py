@@ -5,18 +5,24 @@ Run as a process (``python -m tactile_flow.hardware.emulators.rosbridge_server -
 roslibpy client uses — ``advertise``/``unadvertise``, ``publish``, ``subscribe``/
 ``unsubscribe``, ``call_service`` (``/rosapi/topics``, ``/rosapi/get_time``) — and:
 
-- publishes ``/rh/tactile`` (``sr_robot_msgs/BiotacAll``) at 100 Hz: resting counts from
-  the simulator's sensor model (calibrated on a real Shadow Hand recording), ``header.seq``
-  counting up, wall-clock stamps; fingers given with ``--unconnected`` read pdc = -22072
-  and zeros, as Shadow's driver publishes them;
-- publishes ``/joint_states`` (``sensor_msgs/JointState``) at 100 Hz;
+- publishes ``/rh/tactile`` (``sr_robot_msgs/BiotacAll``) at 100 Hz: counts from the
+  simulator's sensor model (calibrated on a real Shadow Hand recording), resting or — with
+  ``--world-dir`` — pressed by the emulated world (:mod:`.touch`: the board under the
+  emulated arm, the bottle in the hand), ``header.seq`` counting up, wall-clock stamps;
+  fingers given with ``--unconnected`` read pdc = -22072 and zeros, as Shadow's driver
+  publishes them;
+- publishes ``/joint_states`` (``sensor_msgs/JointState``) at 100 Hz (with the world, the
+  grasp fingers stop on the held bottle);
 - follows ``/rh_trajectory_controller/command`` (``trajectory_msgs/JointTrajectory``):
   each named joint moves from where it is to the last point's position, reaching it at
-  that point's ``time_from_start`` (linear in time).
+  that point's ``time_from_start`` (linear in time); with the world the trajectory is shared
+  (``<world dir>/hand``) so the serial BioTac emulator's world grips as this one does.
 
 Control lines on stdin (each answered by one ``OK <json>`` or ``ERR <reason>`` line):
-``pause``/``resume`` publishing (a hung driver), ``stats``, and the faults a real link can
-show: ``corrupt MODE N`` (the next N ``BiotacAll`` messages malformed: ``garbage``, a
+``pause``/``resume`` publishing (a hung driver), ``stats`` (with the world's bottle and the
+monotonic receipt time of every hand command), ``frames A B`` (the monotonic times the
+BiotacAll messages ``A``..``B`` were sent), and the faults a real link can show:
+``corrupt MODE N`` (the next N ``BiotacAll`` messages malformed: ``garbage``, a
 ``tactiles`` field that is not a list; ``overflow``, an electrode at 70000, beyond any 16-bit
 count; ``missing``, the first finger without its ``pdc``), ``disconnect TOPIC`` (close the
 websocket of every client subscribed to ``TOPIC``: the link of that one device lost).
@@ -36,6 +42,9 @@ import numpy as np
 from ..biotac import FINGERS
 from ..hand import JOINT_NAMES
 from .process import EmulatorProcess, emulated_sensor
+from .touch import frame_times, trajectory_positions
+
+CATCH_UP_S = 1.0       # a late loop sends the frames it missed up to this far back (s)
 
 UNCONNECTED = {"pac0": 0, "pac1": 0, "pac": [], "pdc": -22072, "tac": 32570, "tdc": 0, "electrodes": [0] * 24}
 """A port without a sensor (its ``electrodes`` as long as the model's: :meth:`BiotacSource.message`)."""
@@ -66,18 +75,24 @@ def ros_time(t: float) -> dict:
 class HandModel:
     """Joint positions following linear-in-time segments toward commanded targets."""
 
-    def __init__(self):
+    def __init__(self, shared=None):
         n = len(JOINT_NAMES)
         self.start_q = np.zeros(n)
         self.goal_q = np.zeros(n)
         self.t_start = np.zeros(n)
         self.t_end = np.zeros(n)
         self.commands = 0
+        self.received: list[float] = []       # monotonic receipt time of each command (s)
+        self.shared = shared                  # a touch.HandFile the emulated world reads, or None
+        self._share()
 
     def positions(self, t: float) -> np.ndarray:
-        span = np.maximum(self.t_end - self.t_start, 1e-9)
-        s = np.clip((t - self.t_start) / span, 0.0, 1.0)
-        return self.start_q + s * (self.goal_q - self.start_q)
+        """Commanded angles (24,) rad at monotonic time ``t``."""
+        return trajectory_positions(self.start_q, self.goal_q, self.t_start, self.t_end, t)
+
+    def _share(self) -> None:
+        if self.shared is not None:
+            self.shared.write(self.start_q, self.goal_q, self.t_start, self.t_end)
 
     def command(self, msg: dict, t: float) -> None:
         points = msg.get("points") or []
@@ -92,12 +107,15 @@ class HandModel:
                 i = JOINT_NAMES.index(name)
                 self.start_q[i], self.goal_q[i] = q[i], float(goal)
                 self.t_start[i], self.t_end[i] = t, t + duration
+        self._share()
         self.commands += 1
+        self.received.append(t)
 
 
 class BiotacSource:
     """BiotacAll messages from the simulator's calibrated sensor model: resting counts, or
-    pressed by the emulated arm when ``touch`` (:class:`~.touch.EmulatedTouch`) is given."""
+    pressed by the emulated world when ``touch`` (:class:`~.touch.EmulatedWorld`) is given.
+    ``sent[k]`` is the monotonic time message ``k + 1`` was handed to the websocket (s)."""
 
     def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None, sensor=None):
         from ..config import SensorModelConfig
@@ -111,11 +129,15 @@ class BiotacSource:
         self.touch = touch
         self.seq = 0
         self.t0 = time.monotonic()
+        self.sent: list[float] = []
 
-    def message(self, wall: float) -> dict:
-        t = time.monotonic() - self.t0
+    def message(self, wall: float, now: float | None = None) -> dict:
+        """The BiotacAll message of the frame sampled at monotonic ``now`` (default: now),
+        stamped ``wall`` (s since the epoch)."""
+        now = time.monotonic() if now is None else now
+        t = now - self.t0
         if self.touch is not None:
-            self.inputs = self.touch.inputs(t)
+            self.inputs = self.touch.inputs(now)
         e, pdc, tdc, tac, pac = self.model.frame(t, self.inputs)
         self.seq += 1
         tactiles = []
@@ -135,8 +157,9 @@ class Bridge:
 
     def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None, sensor=None):
         self.clients: set = set()
-        self.hand = HandModel()
+        self.hand = HandModel(None if touch is None else touch.hand_writer())
         self.biotacs = BiotacSource(unconnected, seed, rate_hz, touch, sensor)
+        self.world = touch
         self.rate_hz = rate_hz
         self.paused = False
         self.published = {"/rh/tactile": 0, "/joint_states": 0}
@@ -167,18 +190,25 @@ class Bridge:
             reply.update(result=False, values=f"service {name} does not exist (emulated rosbridge)")
         return reply
 
-    def tick(self) -> None:
+    def tick(self, now: float | None = None) -> None:
+        """Publish the frame and the joint state sampled at monotonic ``now`` (default: now;
+        a late loop passes the periods it missed, which go out late but dated)."""
         if self.paused or not self.clients:
             return
-        wall = time.time()
-        msg = self.biotacs.message(wall)
+        mono = time.monotonic()
+        now = mono if now is None else now
+        wall = time.time() - (mono - now)
+        msg = self.biotacs.message(wall, now)
         if self.corrupt_left > 0:
             msg = corrupted(msg, self.corrupt_mode)
             self.corrupt_left -= 1
             self.corrupted += 1
+        self.biotacs.sent.append(time.monotonic())
         self._publish("/rh/tactile", msg)
         self.js_seq += 1
-        q = self.hand.positions(time.monotonic())
+        q = self.hand.positions(now)
+        if self.world is not None:
+            q = self.world.measured_positions(q)
         self._publish("/joint_states", {"header": {"seq": self.js_seq, "stamp": ros_time(wall), "frame_id": ""},
                                         "name": list(JOINT_NAMES), "position": q.tolist(),
                                         "velocity": [0.0] * len(q), "effort": [0.0] * len(q)})
@@ -212,8 +242,13 @@ class Bridge:
             return "OK " + json.dumps({"published": self.published, "clients": len(self.clients),
                                        "corrupted": self.corrupted,
                                        "hand_commands": self.hand.commands, "biotac_seq": self.biotacs.seq,
-                                       "positions": dict(zip(JOINT_NAMES, self.hand.positions(time.monotonic()).round(4).tolist()))})
-        return f"ERR unknown command {cmd!r}; expected pause, resume, stats, corrupt MODE N, disconnect TOPIC"
+                                       "hand_command_times": self.hand.received,
+                                       "positions": dict(zip(JOINT_NAMES, self.hand.positions(time.monotonic()).round(4).tolist())),
+                                       "world": None if self.world is None else self.world.state()})
+        if len(words) == 3 and words[0] == "frames" and all(w.isdigit() for w in words[1:]):
+            return "OK " + json.dumps(frame_times(self.biotacs.sent, int(words[1]), int(words[2])))
+        return (f"ERR unknown command {cmd!r}; expected pause, resume, stats, frames A B, corrupt MODE N, "
+                f"disconnect TOPIC")
 
 
 def make_protocol(bridge: Bridge):
@@ -259,10 +294,12 @@ async def serve(host: str, port: int, bridge: Bridge) -> None:
     threading.Thread(target=read_stdin, daemon=True).start()
     print(f"READY url=ws://{host}:{actual}", flush=True)
     period = 1.0 / bridge.rate_hz
-    t_next = loop.time()
+    t_next = loop.time()                    # asyncio's clock is time.monotonic
     while not done.is_set():
-        bridge.tick()
-        t_next = max(t_next + period, loop.time() - period)
+        bridge.tick(t_next)
+        # the sensors sample on their own clock: a late loop sends the periods it missed, dated
+        # (as a driver behind a stalled link would), up to CATCH_UP_S; beyond, they are skipped
+        t_next = max(t_next + period, loop.time() - CATCH_UP_S)
         await asyncio.sleep(max(0.0, t_next - loop.time()))
     server.close()
 
@@ -279,13 +316,13 @@ class RosbridgeEmulator(EmulatorProcess):
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, seed: int = 0, unconnected=(),
-                 rate_hz: float = 100.0, pose_file: str | None = None, surface: str = "straws",
+                 rate_hz: float = 100.0, world_dir: str | None = None, surface: str = "straws",
                  sensor: str = "biotac_sp"):
         args = ["--host", host, "--port", port, "--seed", seed, "--rate", rate_hz, "--sensor", sensor]
         if unconnected:
             args += ["--unconnected", ",".join(unconnected)]
-        if pose_file:
-            args += ["--pose-file", pose_file, "--surface", surface]
+        if world_dir:
+            args += ["--world-dir", world_dir, "--surface", surface]
         super().__init__("tactile_flow.hardware.emulators.rosbridge_server", args)
 
     @property
@@ -307,8 +344,10 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--rate", type=float, default=100.0, help="BiotacAll and JointState rate (Hz)")
     p.add_argument("--unconnected", default="", help="fingers without a sensor, e.g. rf,lf")
-    p.add_argument("--pose-file", default=None, help="press the BioTacs following this TCP pose (touch.py)")
-    p.add_argument("--surface", default="straws", help="the board pressed on (conf/surface/NAME.yaml)")
+    p.add_argument("--world-dir", default=None,
+                   help="the emulated world's shared files (touch.py): the BioTacs press on the board under the "
+                        "emulated arm and hold the bottle in the hand")
+    p.add_argument("--surface", default="straws", help="the board pressed on (conf/surface/NAME.yaml; none: no board)")
     p.add_argument("--sensor", default="biotac_sp", help="the BioTacs' sensor model: a name (conf/sensor/) or a .yaml")
     a = p.parse_args(argv)
     unconnected = [f for f in a.unconnected.split(",") if f]
@@ -316,9 +355,12 @@ def main(argv=None) -> int:
         p.error(f"--unconnected: expected names of {FINGERS}, got {unconnected}")
     sensor = emulated_sensor(a.sensor, p)
     touch = None
-    if a.pose_file:
-        from .touch import EmulatedTouch
-        touch = EmulatedTouch(a.pose_file, a.surface, [f for f in FINGERS if f not in unconnected], sensor)
+    sensor = emulated_sensor(a.sensor, p)
+    touch = None
+    if a.world_dir:
+        from .touch import EmulatedWorld
+        touch = EmulatedWorld(a.world_dir, None if a.surface == "none" else a.surface,
+                              [f for f in FINGERS if f not in unconnected], sensor)
     bridge = Bridge(unconnected, a.seed, a.rate, touch, sensor)
     try:
         asyncio.run(serve(a.host, a.port, bridge))

@@ -12,10 +12,13 @@ Control lines on stdin (each answered by one ``OK <json>`` or ``ERR <reason>`` l
 - ``truncate K``: cut each of the next K BioTac frames short (the next frame follows at once).
 - ``corrupt K``: flip one payload byte in each of the next K frames (CRC fails).
 - ``disconnect DEVICE``: close that device's pty master (a pulled USB cable).
-- ``stats``: counters and the sequence numbers of the frames sent whole, truncated, corrupted.
+- ``stats``: counters and the sequence numbers of the frames sent whole, truncated, corrupted
+  (and, with ``--world-dir``, the emulated world's bottle: :mod:`.touch`).
+- ``frames A B``: the monotonic times the BioTac frames ``A``..``B`` were sent.
 
 Wire formats: ``docs/serial_protocol.md``. The pump moves water from the reservoir on the
-scale: the scale's reading falls by 1 g per ml dispensed.
+scale into the bottle held in the emulated world (``--world-dir``: the pump's flow is shared
+as ``<world dir>/pump``): the scale's reading falls by 1 g per ml dispensed.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from ..biotac import FINGERS
 from ..serial_biotac import encode_frame
 from ..serial_pour import format_weight_line
 from .process import EmulatorProcess, emulated_sensor
+from .touch import frame_times
 
 FIRMWARE = "2.4-emulated"
 
@@ -85,28 +89,38 @@ class Pty:
                     pass
 
 
-class _Periodic(threading.Thread):
-    """Calls ``tick(k)`` every ``period`` s on an absolute schedule (skips missed periods)."""
+CATCH_UP_S = 1.0      # a sampling device late by up to this (a stalled process) sends what it missed
 
-    def __init__(self, period: float, tick, name: str):
+
+class _Periodic(threading.Thread):
+    """Calls ``tick(k, t)`` every ``period`` s on an absolute schedule, ``t`` the period's
+    scheduled (monotonic) time. A late thread skips the missed periods, or with ``catch_up``
+    (a device that samples on its own clock: the BioTac bridge) calls them all at once, as a
+    sensor buffered behind a stalled link delivers its frames late but dated (up to
+    :data:`CATCH_UP_S`; beyond, the periods are skipped)."""
+
+    def __init__(self, period: float, tick, name: str, catch_up: bool = False):
         super().__init__(name=name, daemon=True)
-        self.period, self.tick = period, tick
+        self.period, self.tick, self.catch_up = period, tick, catch_up
         self.stop = threading.Event()
 
     def run(self) -> None:
         t_next = time.monotonic()
         k = 0
         while not self.stop.is_set():
-            self.tick(k)
+            self.tick(k, t_next)
             k += 1
-            t_next = max(t_next + self.period, time.monotonic() - self.period)
-            self.stop.wait(max(0.0, t_next - time.monotonic()))
+            now = time.monotonic()
+            behind = CATCH_UP_S if self.catch_up else self.period
+            t_next = max(t_next + self.period, now - behind)
+            self.stop.wait(max(0.0, t_next - now))
 
 
 # ============================================================================ BioTac bridge
 class BiotacBridge:
     """Sends BioTac frames (sim sensor model) at ``rate_hz`` with injectable faults: resting,
-    or pressed by the emulated arm when ``touch`` (:class:`~.touch.EmulatedTouch`) is given."""
+    or pressed by the emulated world when ``touch`` (:class:`~.touch.EmulatedWorld`) is given.
+    ``sent[k]`` is the monotonic time frame ``k + 1`` was written to the pty (s)."""
 
     def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0, touch=None, sensor=None):
         from ..config import SensorModelConfig
@@ -130,14 +144,16 @@ class BiotacBridge:
         self.truncated: list[int] = []
         self.corrupted: list[int] = []
         self.dropped: list[int] = []
-        self.thread = _Periodic(1.0 / rate_hz, self._tick, "biotac-bridge")
+        self.sent: list[float] = []
+        self.thread = _Periodic(1.0 / rate_hz, self._tick, "biotac-bridge", catch_up=True)
 
-    def _tick(self, k: int) -> None:
+    def _tick(self, k: int, now: float) -> None:
+        """Sample, encode and send frame ``k``, scheduled (and dated) at monotonic ``now``."""
         if self.pty.closed:
             return
-        t = time.monotonic() - self.t0
+        t = now - self.t0
         if self.touch is not None:
-            self.inputs = self.touch.inputs(t)
+            self.inputs = self.touch.inputs(now)
         e, pdc, tdc, tac, pac = self.model.frame(t, self.inputs)
         self.seq += 1
         frame = encode_frame(self.seq, int(t * 1e6), self.fingers, e, pdc, tdc, tac, pac)
@@ -154,6 +170,7 @@ class BiotacBridge:
                 frame, kind = bytes(b), "corrupted"
         if garbage:
             self.pty.write(self.rng.integers(0, 256, garbage, dtype=np.uint8).tobytes())
+        self.sent.append(time.monotonic())
         sent = self.pty.write(frame)
         log = {"whole": self.whole, "truncated": self.truncated, "corrupted": self.corrupted}[kind]
         (log if sent else self.dropped).append(self.seq)
@@ -161,9 +178,11 @@ class BiotacBridge:
 
 # ============================================================================ pump and scale
 class EmulatedPump:
-    """Shared by the pump (which changes it) and the scale (which weighs the reservoir)."""
+    """Shared by the pump (which changes it) and the scale (which weighs the reservoir);
+    ``shared`` (a :class:`~.touch.PumpFile`) passes the flow on to the emulated world."""
 
-    def __init__(self, max_rate_ml_min: float):
+    def __init__(self, max_rate_ml_min: float, shared=None):
+        self.shared = shared
         self.max_rate = max_rate_ml_min
         self.rate = 0.0
         self.total_ml = 0.0
@@ -171,18 +190,30 @@ class EmulatedPump:
         self.t_last = time.monotonic()
         self.lock = threading.Lock()
         self.done_events = 0
+        self.done_unsent = 0                        # finished dispenses the pump has not announced yet
 
     def advance(self) -> bool:
-        """Integrate the flow up to now; True when a volume dispense just finished."""
+        """Integrate the flow up to now; True when a volume dispense just finished (whoever
+        advances it, the pump announces it: :attr:`done_unsent`)."""
         now = time.monotonic()
         with self.lock:
             self.total_ml += self.rate * (now - self.t_last) / 60.0
             self.t_last = now
-            if self.target_ml is not None and self.total_ml >= self.target_ml:
+            done = self.target_ml is not None and self.total_ml >= self.target_ml
+            if done:
                 self.total_ml, self.rate, self.target_ml = self.target_ml, 0.0, None
                 self.done_events += 1
-                return True
-        return False
+                self.done_unsent += 1
+            if self.shared is not None:
+                self.shared.write(now, self.rate, self.total_ml)
+        return done
+
+    def set(self, rate: float, target_ml: float | None) -> None:
+        """Run at ``rate`` ml/min until ``target_ml`` (total; ``None``: on) — shared at once."""
+        with self.lock:
+            self.rate, self.target_ml = rate, target_ml
+            if self.shared is not None:
+                self.shared.write(time.monotonic(), self.rate, self.total_ml)
 
 
 class PumpDevice:
@@ -196,10 +227,14 @@ class PumpDevice:
         self._pending = b""
         self.thread = _Periodic(0.005, self._tick, "pump")
 
-    def _tick(self, k: int) -> None:
+    def _tick(self, k: int, now: float) -> None:
         if self.pty.closed:
             return
-        if self.state.advance():
+        s = self.state
+        s.advance()
+        with s.lock:
+            done, s.done_unsent = s.done_unsent, 0
+        for _ in range(done):
             self.pty.write(b"*DONE\r")
         data = self.pty.read()
         if not data:
@@ -222,8 +257,7 @@ class PumpDevice:
             if head == "I" and len(parts) == 1:
                 return f"?I,PMP,{FIRMWARE}\n*OK"
             if head == "X" and len(parts) == 1:
-                with s.lock:
-                    s.rate, s.target_ml = 0.0, None
+                s.set(0.0, None)
                 return "*OK"
             if head == "D" and parts[1:] == ["?"]:
                 return f"?D,{s.rate:.3f},{int(s.rate > 0)}\n*OK"
@@ -250,8 +284,7 @@ class PumpDevice:
             rate, target = volume / minutes, s.total_ml + volume
         if not 0 < rate <= s.max_rate * (1 + 1e-6):
             return "*ER"
-        with s.lock:
-            s.rate, s.target_ml = rate, target
+        s.set(rate, target)
         return "*OK"
 
 
@@ -272,7 +305,7 @@ class ScaleDevice:
         self.state.advance()
         return self.reservoir_g - self.state.total_ml
 
-    def _tick(self, k: int) -> None:
+    def _tick(self, k: int, now: float) -> None:
         if self.pty.closed:
             return
         if b"T" in self.pty.read().upper():
@@ -294,7 +327,8 @@ class SerialLab:
     def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0,
                  pump_max_rate_ml_min: float = 150.0, reservoir_g: float = 1500.0, touch=None, sensor=None):
         self.biotac = BiotacBridge(fingers, rate_hz, seed, touch, sensor)
-        self.pump_state = EmulatedPump(pump_max_rate_ml_min)
+        self.world = touch
+        self.pump_state = EmulatedPump(pump_max_rate_ml_min, None if touch is None else touch.pump_writer())
         self.pump = PumpDevice(self.pump_state)
         self.scale = ScaleDevice(self.pump_state, reservoir_g, seed=seed)
         self.devices = {"biotac": self.biotac, "pump": self.pump, "scale": self.scale}
@@ -327,8 +361,12 @@ class SerialLab:
                                        "overruns": {n: d.pty.overruns for n, d in self.devices.items()},
                                        "pump": {"rate": self.pump_state.rate, "total_ml": self.pump_state.total_ml,
                                                 "commands": self.pump.commands, "errors": self.pump.errors},
-                                       "scale": {"lines": self.scale.lines, "tare_g": self.scale.tare_g}})
-        return f"ERR unknown command {line!r}; expected garbage N, truncate K, corrupt K, disconnect DEVICE, stats"
+                                       "scale": {"lines": self.scale.lines, "tare_g": self.scale.tare_g},
+                                       "world": None if self.world is None else self.world.state()})
+        if cmd == "frames" and len(args) == 2 and all(a.isdigit() for a in args):
+            return "OK " + json.dumps(frame_times(b.sent, int(args[0]), int(args[1])))
+        return (f"ERR unknown command {line!r}; expected garbage N, truncate K, corrupt K, disconnect DEVICE, "
+                f"stats, frames A B")
 
 
 def link_ports(ports: dict[str, str], link_dir: str) -> None:
@@ -351,14 +389,14 @@ class SerialDevicesEmulator(EmulatorProcess):
     """
 
     def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0, link_dir: str | None = None,
-                 pump_max_rate_ml_min: float = 150.0, pose_file: str | None = None, surface: str = "straws",
+                 pump_max_rate_ml_min: float = 150.0, world_dir: str | None = None, surface: str = "straws",
                  sensor: str = "biotac_sp"):
         args = ["--fingers", ",".join(fingers), "--rate", rate_hz, "--seed", seed,
                 "--pump-max-rate", pump_max_rate_ml_min, "--sensor", sensor]
         if link_dir:
             args += ["--link-dir", link_dir]
-        if pose_file:
-            args += ["--pose-file", pose_file, "--surface", surface]
+        if world_dir:
+            args += ["--world-dir", world_dir, "--surface", surface]
         super().__init__("tactile_flow.hardware.emulators.serial_devices", args)
 
     @property
@@ -380,8 +418,10 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--pump-max-rate", type=float, default=150.0, help="ml/min")
     p.add_argument("--link-dir", default=None)
-    p.add_argument("--pose-file", default=None, help="press the BioTacs following this TCP pose (touch.py)")
-    p.add_argument("--surface", default="straws", help="the board pressed on (conf/surface/NAME.yaml)")
+    p.add_argument("--world-dir", default=None,
+                   help="the emulated world's shared files (touch.py): the BioTacs press on the board under the "
+                        "emulated arm and hold the bottle the pump fills")
+    p.add_argument("--surface", default="straws", help="the board pressed on (conf/surface/NAME.yaml; none: no board)")
     p.add_argument("--sensor", default="biotac_sp", help="the BioTacs' sensor model: a name (conf/sensor/) or a .yaml")
     a = p.parse_args(argv)
     fingers = [f for f in a.fingers.split(",") if f]
@@ -390,9 +430,11 @@ def main(argv=None) -> int:
         p.error(f"--fingers: unknown {bad}; expected names of {FINGERS}")
     sensor = emulated_sensor(a.sensor, p)
     touch = None
-    if a.pose_file:
-        from .touch import EmulatedTouch
-        touch = EmulatedTouch(a.pose_file, a.surface, fingers, sensor)
+    sensor = emulated_sensor(a.sensor, p)
+    touch = None
+    if a.world_dir:
+        from .touch import EmulatedWorld
+        touch = EmulatedWorld(a.world_dir, None if a.surface == "none" else a.surface, fingers, sensor)
     lab = SerialLab(fingers, a.rate, a.seed, a.pump_max_rate, touch=touch, sensor=sensor)
     if a.link_dir:
         link_ports(lab.ports(), a.link_dir)

@@ -283,8 +283,8 @@ class SimWorld:
         self.pump_target_ml = self.dispensed_ml + volume_ml
 
     # ------------------------------------------------------------------ per frame
-    def _frame(self, t: float) -> None:
-        dt = self.frame_dt
+    def _frame(self, t: float, dt: float | None = None) -> None:
+        dt = self.frame_dt if dt is None else dt
         # pump
         if self.pump_rate > 0:
             self.dispensed_ml = min(self.dispensed_ml + self.pump_rate / 60.0 * dt, self.pump_target_ml)
@@ -313,14 +313,29 @@ class SimWorld:
         if total > self.cfg.arm.max_contact_force_n:
             self.protective_stop(t, f"contact force {total:.1f} N above hardware.arm.max_contact_force_n")
 
-    def touch(self, t: float, pose, velocity) -> None:
-        """The fingertip contacts (:attr:`contacts`) for the TCP at ``pose`` ``[x, y, z, rx, ry,
-        rz]`` (m, rad) moving at ``velocity`` (3,) m/s at time ``t`` (s), without advancing the
-        world: what the emulated lab's BioTacs feel following the emulated arm
-        (:mod:`hardware.emulators.touch`)."""
-        pose = np.asarray(pose, float)
-        self.arm_now = (pose[:3], rotvec_to_matrix(pose[3:]), np.r_[np.asarray(velocity, float)[:3], 0.0, 0.0, 0.0])
-        self._fingertips(t, self.frame_dt, 0.0)
+    def follow(self, t: float, dt: float, pose=None, velocity=None, hand=None, pump_ml_min: float = 0.0) -> None:
+        """One frame of the world driven from outside, at time ``t`` (s) and ``dt`` (s) after
+        the last: what the emulated lab's BioTacs feel (:mod:`hardware.emulators.touch`). The
+        devices are other processes, so the world does not move them; it takes their state:
+
+        - ``pose`` ``[x, y, z, rx, ry, rz]`` (m, rad) and ``velocity`` (3,) m/s: the TCP (the
+          UR emulator's; ``None``: where it was);
+        - ``hand``: ``(q, t_end)``: the joint angles (24,) rad the hand is commanded to now and
+          the time (s) its trajectory ends (the rosbridge emulator's; ``None``: unchanged);
+        - ``pump_ml_min``: the pump's flow into the held bottle (the pump emulator's).
+
+        Then the pour, the grasp and its slip, and the fingertip contacts are resolved as
+        every frame of the simulated lab (:meth:`_frame`); :attr:`contacts`, :attr:`grasp` and
+        :attr:`truth` hold the result."""
+        if pose is not None:
+            pose = np.asarray(pose, float)
+            v = np.zeros(6) if velocity is None else np.r_[np.asarray(velocity, float)[:3], 0.0, 0.0, 0.0]
+            self.arm_now = (pose[:3], rotvec_to_matrix(pose[3:]), v)
+        if hand is not None:
+            q, t_end = hand
+            self._hand = (float(t_end), np.asarray(q, float).copy(), np.asarray(q, float).copy(), 0.0)
+        self.pump_rate, self.pump_target_ml = max(float(pump_ml_min), 0.0), math.inf
+        self._frame(t, dt)
 
     def _fingertips(self, t: float, dt: float, N: float) -> None:
         p, R, v = self.arm_now
