@@ -77,9 +77,13 @@ def each_in_workers(fn: Callable, items: Iterable, workers: int) -> Iterator[tup
                 i = pending.pop(fut)
                 exc = fut.exception()
                 if isinstance(exc, BrokenProcessPool):
-                    raise WorkerDied(f"a worker process died (killed?) while on item {i + 1} of {len(items)}")
+                    raise WorkerDied(f"a worker process died (killed?) with item {i + 1} of {len(items)} to do")
                 yield i, (exc if exc is not None else fut.result())
-            fill()
+            try:
+                fill()
+            except BrokenProcessPool:           # a worker died since the last result came
+                raise WorkerDied(f"a worker process died (killed?) with item {queued + 1} of {len(items)} to "
+                                 f"do") from None
         done_cleanly = True
     finally:
         if pool is not None and done_cleanly:

@@ -376,7 +376,7 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
                                  list(p.fingers), p.decision["dropped"], p.scan.frames, got["rate_hz"],
                                  b.method if b else "none", reader_warnings(p.reader.meta), src.subfolder,
                                  f"{p.sensor.name} ({p.sensor_how})", reader_notes(p.reader.meta))
-                results.append(r)
+                results.append((i, r))
                 if say:
                     say(result_line(r))
         except BaseException:
@@ -390,6 +390,7 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
         finally:
             for s in staged:
                 release_staging(s)
+    results = [r for _, r in sorted(results, key=lambda x: x[0])]          # the sources' order, as with one worker
     if failures:
         raise ImportIncomplete(results, failures)
     return results
