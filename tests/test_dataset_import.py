@@ -188,3 +188,28 @@ def test_a_directory_analysed_over_two_workers_is_the_same_as_one(tmp_path):
         assert sorted(x) == sorted(y)
         for k in x:
             np.testing.assert_array_equal(x[k], y[k], err_msg=k)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_directory_analysis_interrupted_keeps_whole_analyses_and_the_next_one_finishes(tmp_path, sig):
+    dataset(tmp_path / "data", 12, folders=2)
+    import_source(tmp_path / "data", tmp_path / "runs", ImportSettings(rate_hz=100), workers=2)
+    cmd = [*ANALYZE, "run=runs", "workers=2", "analysis.figures=false"]
+    proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while not list((tmp_path / "runs").glob("*/*/analysis")):           # the first analysis in place
+        assert proc.poll() is None and time.monotonic() < deadline
+        time.sleep(0.02)
+    proc.send_signal(sig)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == INTERRUPTED and "Traceback" not in err, err
+    assert "analysis interrupted" in err and "the same command again" in err
+    assert not _children(proc.pid)
+    done = [r for r in visible_runs(tmp_path / "runs") if (r / "analysis").exists()]
+    assert 1 <= len(done) < 12
+    for run in done:                                                   # whole: its summary is there
+        assert json.loads((run / "summary.json").read_text())["headline"]
+    again = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert (tmp_path / "runs" / "analysis_summary.csv").read_text().count("analysed") == 12
