@@ -1,0 +1,110 @@
+"""A run outlives this code: every array of a run store is read by an independent zarr v3
+implementation (tensorstore's ``zarr3`` driver, C++) with the values zarr-python reads, except
+the text arrays, which the zarr v3 core has no data type for (``docs/run_store.md``, "Reading
+a store without zarr-python"). Also: the stores of an import and of a run open with
+``xarray.open_datatree`` as they did, and an import holds no empty device groups."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zarr
+from hydra import compose, initialize_config_dir
+
+from conftest import DATA
+
+ts = pytest.importorskip("tensorstore")
+xr = pytest.importorskip("xarray")
+
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+FAST = ["protocol.sweep_speed=40", "protocol.travel_speed=100", "protocol.approach_speed=10",
+        "progress=false", "analyze=false"]
+#: the data type zarr-python gives text ("string", codec vlen-utf8): a zarr-python extension
+#: outside the v3 core, which tensorstore refuses (its data types: the core's, plus r<N>)
+TEXT = "string"
+
+
+def _arrays(store: Path) -> dict[str, zarr.Array]:
+    """Every array of the store at its last commit (the consolidated metadata), by path."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        root = zarr.open_group(str(store), mode="r", use_consolidated=True)
+        return {path: a for path, a in root.members(max_depth=None) if isinstance(a, zarr.Array)}
+
+
+def _tensorstore(store: Path, path: str):
+    return ts.open({"driver": "zarr3", "kvstore": {"driver": "file", "path": str(store / path)}},
+                   read=True).result()
+
+
+def _check_every_array(store: Path) -> tuple[int, list[str]]:
+    """Read every array with tensorstore and compare it with zarr-python's values; returns the
+    count read and the text arrays (which tensorstore must refuse, for the documented reason)."""
+    read, text = 0, []
+    for path, a in _arrays(store).items():
+        meta = json.loads((store / path / "zarr.json").read_bytes())
+        if meta["data_type"] == TEXT:
+            with pytest.raises(ValueError, match="string data type is not one of the supported"):
+                _tensorstore(store, path)
+            text.append(path)
+            continue
+        expected = a[...]
+        got = _tensorstore(store, path).read().result()
+        assert got.dtype == expected.dtype and got.shape == expected.shape, path
+        np.testing.assert_array_equal(got, expected, err_msg=path)
+        read += 1
+    return read, text
+
+
+@pytest.fixture(scope="module")
+def default_run(tmp_path_factory):
+    """The default protocol (the straws sweep) on the simulated lab, shortened."""
+    from tactile_flow.protocols.run import run_protocol
+    from tactile_flow.protocols.schema import register
+    register()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base=None):
+        cfg = compose("config", overrides=FAST)
+    result = run_protocol(cfg, tmp_path_factory.mktemp("run"), console=lambda *a: None)
+    assert result.status == "success", result.error
+    return Path(result.store)
+
+
+def test_tensorstore_reads_every_numeric_array_of_a_default_run(default_run):
+    read, text = _check_every_array(default_run)
+    assert read >= 70                                    # every device, events' times, the truth
+    assert {"events/kind", "events/name", "events/detail", "biotac/finger", "arm/axis6", "hand/joint"} <= set(text)
+
+
+def test_tensorstore_reads_every_numeric_array_of_imported_records(tmp_path):
+    from tactile_flow.importers import ImportSettings, import_source
+    (bag,) = import_source(DATA / "biotac_rest_untouched.bag", tmp_path / "bag", ImportSettings())
+    read, text = _check_every_array(Path(bag.store))
+    assert read == 15 and sorted(text) == ["biotac/finger", "biotac_pac/finger", "events/detail",
+                                           "events/kind", "events/name"]
+    electrodes = _tensorstore(Path(bag.store), "biotac/electrodes").read().result()
+    assert electrodes.shape == (977, 3, 24) and electrodes.dtype == np.int16
+
+
+def test_an_imported_csv_holds_only_its_streams_and_opens_with_xarray(tmp_path):
+    """A CSV of one finger's electrodes: the store has ``biotac`` and ``events`` only, every
+    array readable, and ``xarray.open_datatree`` gives the values written."""
+    from tactile_flow.importers import ImportSettings, import_source
+    rng = np.random.default_rng(3)
+    counts = rng.integers(2000, 3500, (275, 24))
+    src = tmp_path / "short.csv"
+    src.write_text("time," + ",".join(f"e{i}" for i in range(1, 25)) + "\n"
+                   + "".join(f"{k / 100:.2f}," + ",".join(map(str, row)) + "\n" for k, row in enumerate(counts)))
+    (res,) = import_source(src, tmp_path / "out", ImportSettings(rate_hz=100.0))
+    store = Path(res.store)
+    tree = xr.open_datatree(store, engine="zarr")
+    assert set(tree.children) == {"biotac", "events"}
+    np.testing.assert_array_equal(tree["biotac"]["electrodes"].values[:, 0, :], counts)
+    assert tree["events"]["kind"].values.tolist() == ["info"]
+    read, text = _check_every_array(store)
+    assert read == 8 and sorted(text) == ["biotac/finger", "events/detail", "events/kind", "events/name"]
+    files = [p for p in store.rglob("*") if p.is_file()]
+    assert len(files) <= 28, sorted(str(p.relative_to(store)) for p in files)
