@@ -108,3 +108,41 @@ def test_an_imported_csv_holds_only_its_streams_and_opens_with_xarray(tmp_path):
     assert read == 8 and sorted(text) == ["biotac/finger", "events/detail", "events/kind", "events/name"]
     files = [p for p in store.rglob("*") if p.is_file()]
     assert len(files) <= 28, sorted(str(p.relative_to(store)) for p in files)
+
+
+def _analysis_tree(run_dir: Path):
+    return xr.open_datatree(run_dir / "analysis" / "analysis.zarr", engine="zarr")
+
+
+def test_a_store_of_the_earlier_layout_opens_and_analyses_as_the_same_file_imported_today(tmp_path):
+    """``import_store_0.2.zip``: a CSV imported before issue 36 (every lab group present, the
+    empty ones too; indented metadata). It opens with xarray, tensorstore reads its numeric
+    arrays, and its analysis equals, array for array, that of the same CSV imported today."""
+    import zipfile
+    from tactile_flow.analysis.run import analyze_run
+    from tactile_flow.importers import ImportSettings, import_source
+    old = tmp_path / "old"
+    with zipfile.ZipFile(DATA / "import_store_0.2.zip") as z:
+        z.extractall(old)
+    tree = xr.open_datatree(old / "run.zarr", engine="zarr")
+    assert set(tree.children) == {"biotac", "biotac_pac", "arm", "hand", "pour", "events"}
+    assert tree["arm"].sizes["time_arm"] == 0 and tree["biotac"].sizes["time"] == 275
+    read, text = _check_every_array(old / "run.zarr")
+    assert read > 30 and {"events/kind", "arm/axis6", "hand/joint"} <= set(text)
+
+    (new,) = import_source(old / "short.csv", tmp_path / "new", ImportSettings(rate_hz=100.0, baseline="estimate"))
+    new_dir = Path(new.store).parent
+    assert set(xr.open_datatree(new.store, engine="zarr").children) == {"biotac", "events"}
+    np.testing.assert_array_equal(xr.open_datatree(new.store, engine="zarr")["biotac"]["electrodes"].values,
+                                  tree["biotac"]["electrodes"].values)
+    cfg = {"figures": False, "progress": False}
+    before = analyze_run(old / "run.zarr", cfg, console=lambda *a: None)
+    after = analyze_run(new.store, cfg, console=lambda *a: None)
+    assert before["segments"] == after["segments"] and len(before["segments"]) >= 1
+    a, b = _analysis_tree(old), _analysis_tree(new_dir)
+    assert [n.path for n in a.subtree] == [n.path for n in b.subtree]
+    for node in a.subtree:
+        for name, var in node.ds.variables.items():
+            other = b[node.path].ds.variables[name]
+            assert var.dims == other.dims, (node.path, name)
+            np.testing.assert_array_equal(var.values, other.values, err_msg=f"{node.path}/{name}")
