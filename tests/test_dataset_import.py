@@ -213,3 +213,31 @@ def test_a_directory_analysis_interrupted_keeps_whole_analyses_and_the_next_one_
     again = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert again.returncode == 0, again.stderr
     assert (tmp_path / "runs" / "analysis_summary.csv").read_text().count("analysed") == 12
+
+
+def test_a_directory_import_on_a_terminal_shows_one_progress_line_of_files_done_total_and_rate(tmp_path):
+    import pty
+    dataset(tmp_path / "data", 6)
+    import fcntl
+    import struct
+    import termios
+    main, tty = pty.openpty()
+    fcntl.ioctl(tty, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 120, 0, 0))   # a terminal 120 wide
+    proc = subprocess.Popen([*IMPORT, f"source={tmp_path / 'data'}", "out=out", "rate_hz=100", "workers=2"],
+                            cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=tty)
+    os.close(tty)
+    chunks = []
+    while True:
+        try:
+            data = os.read(main, 4096)
+        except OSError:                                   # the terminal closed: the process is done
+            break
+        if not data:
+            break
+        chunks.append(data)
+    proc.wait(timeout=120)
+    os.close(main)
+    text = b"".join(chunks).decode(errors="replace")
+    assert proc.returncode == 0, text
+    assert "\n" not in text.rstrip()                      # redrawn in place (\r): one line
+    assert "import: writing" in text and "6/6" in text and "file/s" in text
