@@ -307,7 +307,7 @@ def _rotation_evidence(cf, views, ref, stop, model, pm, end, moving) -> tuple[di
     if per_frame is not None and len(per_frame) > 1:
         dynamic = float(per_frame.sum())
         moving_frames = int(np.count_nonzero(per_frame))
-    static = None
+    static = series = None
     if cf.reference is not None:
         series = static_rotation_series(cf, views, ref, stop, model)
         if series is not None and len(series):
@@ -317,8 +317,27 @@ def _rotation_evidence(cf, views, ref, stop, model, pm, end, moving) -> tuple[di
     both = [v for v in (dynamic, static) if v is not None]
     evidence = {"rotation_deg": float(np.mean(both)) if both else None, "dynamic_deg": dynamic,
                 "moving_frames": moving_frames,
-                "static_deg": static, "pattern_turn_deg": turn, "pattern_elongation": pm.elongation}
+                "static_deg": static, "pattern_turn_deg": turn, "pattern_elongation": pm.elongation,
+                "peak_deg": _peak_turn(per_frame, series)}
     return evidence, (None if per_frame is None else np.r_[0.0, np.cumsum(per_frame)])
+
+
+def _peak_turn(per_frame, series, q: float = 90.0) -> float | None:
+    """How far the pattern turned (deg, signed), not where it ended: the ``q``-th percentile of
+    |the mean of the summed dynamic rotation and the static rotation since the reference|, frame
+    by frame, with the sense of its largest excursion (the turn's analogue of
+    ``slip_displacement_mm``; recorded as evidence, not used by the decision: on the simulated
+    grids it recognises every rotation of the SP's classic grid but reads more pulls as twists,
+    docs/analysis.md)."""
+    if per_frame is None or series is None:
+        return None
+    summed = np.r_[0.0, np.cumsum(per_frame)]
+    n = min(len(summed), len(series))
+    if n < 2:
+        return None
+    r = 0.5 * (summed[:n] + series[:n])
+    k = int(np.argmax(np.abs(r)))
+    return float(np.sign(r[k]) * np.percentile(np.abs(r), q))
 
 
 def _direction(motion: dict, evidence: dict) -> tuple[float | None, float | None]:
