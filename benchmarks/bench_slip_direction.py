@@ -15,7 +15,8 @@ per finger and grasp file) and counts how many read as touch.
 
 Each sensor model of ``--sensor`` (``conf/sensor/``; by default the BioTac SP and the classic
 BioTac, docs/sensors.md) runs the grid with its own fingertips, and its lines and tables are
-headed by its name. Prints JSON lines (per condition cell: tare/no tare × light/firm; the totals; the onset; the
+headed by its name. Prints JSON lines (per run: the truth, what it was read as, its displacement and rotation
+evidence, the onset's error; per condition cell: tare/no tare × light/firm; the totals; the onset; the
 real touches), then markdown tables (docs/analysis.md):
 
 - the confusion matrix of the shipped estimate over the true motion (each translation
@@ -196,6 +197,29 @@ def markdown_confusion(labels, counts) -> str:
     return "\n".join(lines)
 
 
+def spurious_turns(rows, bins) -> str:
+    """Markdown: what the pulls' rotation evidence reads per mm of displacement (deg/mm, median
+    and range over the pulls of each direction): a pull has no turn, so this is the flows' own
+    spurious turn, the noise the rotation decision must rise above."""
+    per = defaultdict(lambda: defaultdict(list))
+    for c, tr, est in rows:
+        if c.motion != "translate" or not est or not est.get("slip_displacement_mm"):
+            continue
+        rot, d = est["evidence"].get("rotation") or {}, est["slip_displacement_mm"]
+        b = min(bins, key=lambda x: angle_error(c.direction_deg, x)) % 360
+        for key in ("dynamic_deg", "static_deg", "rotation_deg"):
+            if rot.get(key) is not None:
+                per[b][key].append(rot[key] / d)
+    cell = lambda v: f"{np.median(v):+.2f} ({min(v):+.2f}…{max(v):+.2f})" if v else "–"  # noqa: E731
+    lines = ["\n| pull direction | pulls | dynamic flow, deg/mm | static flow, deg/mm | their mean (shipped), deg/mm |",
+             "| --- | --- | --- | --- | --- |"]
+    for b in sorted(per):
+        p = per[b]
+        lines.append(f"| {b:.0f}° | {len(p['rotation_deg'])} | {cell(p['dynamic_deg'])} | {cell(p['static_deg'])} | "
+                     f"{cell(p['rotation_deg'])} |")
+    return "\n".join(lines)
+
+
 def real_touch(out: Path, per_finger: int) -> dict:
     """Records of real contact frames held still, read as touch (``tests/real_touch.py``)."""
     sys.path.insert(0, str(ROOT / "tests"))
@@ -243,8 +267,11 @@ def bench(args, sensor: str) -> None:
         for c, store in runs(args.out, args.grid, noise, args.quick, sensor):
             tr, est = evaluate(store, model, cfg)
             everything.append((noise, c, tr, est))
+            rot = ((est or {}).get("evidence") or {}).get("rotation") or {}
             print(json.dumps({"sensor": sensor, "run": c.name, "noise": noise, "truth": true_label(c, bins),
                               "read": read_label(*reread(est, cfg.slip), bins),
+                              "displacement_mm": (est or {}).get("slip_displacement_mm"),
+                              **{k: rot.get(k) for k in ("dynamic_deg", "static_deg", "peak_deg")},
                               "onset_error_ms": None if not est or est.get("slip_onset_s") is None
                               or not math.isfinite(tr.get("true_slip_onset_s", float("nan")))
                               else round(1e3 * (est["slip_onset_s"] - tr["true_slip_onset_s"]), 1)}),
@@ -276,6 +303,7 @@ def bench(args, sensor: str) -> None:
             continue
         print(f"| {name} | {fmt(r.get('translate'))} | {fmt(r.get('rotate'))} | {fmt(r.get('none'))} | "
               f"{fmt(r.get('touch_vs_slip'))} | {fmt(r.get('rotation_sense'))} | {fmt(r.get('rotation_recognised'))} |")
+    print(spurious_turns(rows, bins))
     o = total["onset"]
     print(f"\nslip onset: {o['dated']} of {o['slips']} slips dated; within 50 ms of the truth: {fmt(o['within_50ms'])}; "
           f"median error {o['median_ms'] if o['median_ms'] is None else round(o['median_ms'], 1)} ms; "
