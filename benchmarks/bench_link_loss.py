@@ -25,7 +25,6 @@ import argparse
 import json
 import os
 import random
-import socket
 import sys
 import tempfile
 import time
@@ -36,6 +35,7 @@ import xarray as xr
 
 ROOT = Path(__file__).resolve().parents[1]
 from tactile_flow.hardware.emulators.links import LINKS  # noqa: E402
+from tactile_flow.hardware.emulators.process import free_loopback as emulated_loopback  # noqa: E402
 TARGET_S = 0.5
 HOME = (0.3, 0.0, 0.2, 3.141592653589793, 0.0, 0.0)
 WINDOW_S = {"pump": (4.0, 8.0)}          # cut while the pump runs (it starts ~3 s into the run)
@@ -43,15 +43,10 @@ DEFAULT_WINDOW_S = (1.0, 8.0)
 
 
 def free_loopback() -> str:
-    for _ in range(50):
-        host = f"127.0.{90 + os.getpid() % 50}.{random.randint(2, 250)}"
-        with socket.socket() as s:
-            try:
-                s.bind((host, 30004))
-                return host
-            except OSError:
-                continue
-    raise RuntimeError("no free loopback address for the UR controller emulator")
+    host = emulated_loopback(90 + os.getpid() % 50)
+    if host is None:
+        raise RuntimeError("no free loopback address for the UR controller emulator")
+    return host
 
 
 def trial(link: str, delay_s: float, work: Path) -> dict:

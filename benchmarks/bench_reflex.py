@@ -45,7 +45,6 @@ import argparse
 import json
 import os
 import random
-import socket
 import sys
 import tempfile
 import time
@@ -67,16 +66,11 @@ def load() -> float:
 
 
 def free_loopback() -> str:
-    """A 127.0.x.y whose RTDE port is free (the UR emulator's ports are fixed)."""
-    for _ in range(50):
-        host = f"127.0.{random.randint(100, 200)}.{random.randint(2, 250)}"
-        with socket.socket() as s:
-            try:
-                s.bind((host, 30004))
-                return host
-            except OSError:
-                continue
-    raise SystemExit("no free loopback address for the UR controller emulator")
+    from tactile_flow.hardware.emulators.process import free_loopback as emulated_loopback
+    host = emulated_loopback(random.randint(100, 200))
+    if host is None:
+        raise SystemExit("no free loopback address for the UR controller emulator")
+    return host
 
 
 def compose(overrides):

@@ -10,7 +10,9 @@ reads it like any run:
   ``electrodes``; ``pdc``/``tdc``/``tac`` only when the file holds them (an electrode-only
   record has no ``pdc`` variable, so the analysis uses its electrode proxy);
   ``baseline`` (finger, taxel) counts when a baseline from elsewhere was given;
-- ``biotac_pac``: the PAC samples (bags), empty for CSV;
+- ``biotac_pac``: the PAC samples, only when the file holds them (bags); no ``arm``, ``hand``,
+  ``pour`` or ``stage`` group (a file of tactile frames never had those devices, and every
+  empty group or array would be files on disk: ``docs/run_store.md``, "Files per run");
 - ``events``: an ``info`` event ``import`` at 0 s, and a ``gap`` event per sequence jump;
 - root attributes: ``protocol="import"``, ``labels=[]``, ``status="success"``, ``import``
   (source, checksum, importer, finger decision), ``baseline``, ``calibration``, ``streams``.
@@ -38,7 +40,7 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from tactile_flow.hardware.biotac import COUNTS_MAX, PAC_RATE_HZ
+from tactile_flow.hardware.biotac import COUNTS_MAX, PAC_RATE_HZ, BiotacFrame
 from tactile_flow.hardware.device import batch_times
 from tactile_flow.hardware.streams import as_dtype
 from tactile_flow.runstore import RunStatus, RunStore, inflight, rundir
@@ -173,7 +175,7 @@ def write_import_store(prepared: PreparedSource, store_path: Path, provenance: d
              "streams_recorded": ["biotac"], "t0_clock_s": scan.t0,
              "recording_start_time": _iso(scan.t0) if has_host else None}
     store = RunStore.create(store_path, protocol=PROTOCOL, fingers=fingers, provenance=provenance, attrs=attrs,
-                            sensor=prepared.sensor)
+                            sensor=prepared.sensor, streams=source_streams(fingers, prepared.sensor, scan.channels))
     try:
         counters = _append_chunks(store, prepared, to_run, host_t0,
                                   {"source": import_attrs.get("source"), "fingers": import_attrs.get("fingers")})
@@ -204,6 +206,15 @@ def write_import_store(prepared: PreparedSource, store_path: Path, provenance: d
     return {**stream, "t0": scan.t0, "rate_hz": rate}
 
 
+def source_streams(fingers, sensor, channels) -> dict:
+    """The streams an imported file fills: ``biotac``, and ``biotac_pac`` when ``channels`` (the
+    file's optional channels) hold ``pac`` and the sensor model has a vibration channel."""
+    streams = {s.name: s for s in BiotacFrame.describe(tuple(fingers), sensor)}
+    if "pac" not in channels:
+        streams.pop("biotac_pac", None)
+    return streams
+
+
 def _append_chunks(store: RunStore, prepared: PreparedSource, to_run, host_t0: float, import_detail: dict) -> dict:
     """Append every chunk (the second pass) with its gap events after the ``import`` event;
     returns the counters (samples, gaps, missing, invalid) and the residual-latency sample
@@ -218,7 +229,7 @@ def _append_chunks(store: RunStore, prepared: PreparedSource, to_run, host_t0: f
     for chunk in prepared.chunks():
         bio = biotac_block(chunk, to_run, host_t0, sensor)
         blocks = {"biotac": bio}
-        if chunk.pac is not None and (sensor is None or vib is not None):
+        if chunk.pac is not None and "biotac_pac" in store.schema:
             blocks["biotac_pac"] = pac_block(chunk, to_run, host_t0, vib.rate_hz if vib else PAC_RATE_HZ,
                                              previous=last_pac, name=vib.name if vib else "pac")
             if len(blocks["biotac_pac"]["device_time"]):

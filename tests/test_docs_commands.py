@@ -125,6 +125,7 @@ TESTED: dict[str, object] = {
     'python benchmarks/bench_pipeline.py --seconds 20 --naive-frames 10 --render exact': BENCH,
     'python benchmarks/bench_pipeline.py --seconds 20 --naive-frames 10 --render exact linear': BENCH,
     'python benchmarks/bench_recorder.py': BENCH,
+    'python benchmarks/bench_store_files.py': BENCH,
     'python benchmarks/bench_recorder.py --sim-s 20 --repeat 2': BENCH,
     'python benchmarks/bench_recorder.py --sim-s 20 --repeat 3': BENCH,
     'python benchmarks/bench_sim.py': BENCH,

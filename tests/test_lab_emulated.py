@@ -6,7 +6,6 @@ passes their addresses as overrides."""
 from __future__ import annotations
 
 import os
-import random
 import socket
 import time
 from pathlib import Path
@@ -18,6 +17,7 @@ from hydra import compose, initialize_config_dir
 
 pytest.importorskip("rtde_control")
 
+from tactile_flow.hardware.emulators.process import free_loopback as emulated_loopback  # noqa: E402
 from tactile_flow.hardware.emulators.rosbridge_server import RosbridgeEmulator  # noqa: E402
 from tactile_flow.hardware.emulators.serial_devices import SerialDevicesEmulator  # noqa: E402
 from tactile_flow.hardware.emulators.ur_controller import URControllerProcess  # noqa: E402
@@ -33,17 +33,9 @@ FAST = ["protocol.sweep_speed=40", "protocol.travel_speed=100", "protocol.approa
 
 
 def free_loopback() -> str:
-    """A 127.0.x.y whose RTDE port is free: the UR ports are fixed, so parallel runs need their own address."""
+    """A 127.0.x.y whose RTDE port is free, x per xdist worker (parallel runs need their own address)."""
     worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
-    for _ in range(50):
-        host = f"127.0.{60 + int(worker[2:] or 0)}.{random.randint(2, 250)}"
-        with socket.socket() as s:
-            try:
-                s.bind((host, 30004))
-                return host
-            except OSError:
-                continue
-    pytest.skip("no free loopback address for the UR controller emulator")
+    return emulated_loopback(60 + int(worker[2:] or 0)) or pytest.skip("no free loopback address for the UR emulator")
 
 
 @pytest.fixture(scope="module")

@@ -111,3 +111,20 @@ def emulated_sensor(value: str, parser):
         return load_sensor_file(value) if value.endswith((".yaml", ".yml")) else builtin_sensor(value)
     except SensorModelError as exc:
         parser.error(f"--sensor: {exc}")
+
+
+def free_loopback(subnet: int, port: int = 30004, tries: int = 50) -> str | None:
+    """A loopback address ``127.0.<subnet>.<n>`` on which TCP ``port`` is free, or None after
+    ``tries``: the UR controller emulator's ports are fixed (RTDE 30004, dashboard 29999), so
+    emulated labs running side by side (test workers, benchmarks) need an address each."""
+    import random
+    import socket
+    for _ in range(tries):
+        host = f"127.0.{subnet}.{random.randint(2, 250)}"
+        with socket.socket() as s:
+            try:
+                s.bind((host, port))
+                return host
+            except OSError:
+                continue
+    return None
