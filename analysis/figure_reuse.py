@@ -54,8 +54,16 @@ def code_digest() -> str:
     return h.hexdigest()
 
 
+_PLAIN = (type(None), bool, int, float, str)
+
+
+def _plain(values) -> bool:
+    return all(type(v) in _PLAIN for v in values)
+
+
 def _feed(h, obj) -> None:
-    """Feed ``obj`` to the hash ``h`` unambiguously (type tags, lengths, array dtypes and shapes)."""
+    """Feed ``obj`` to the hash ``h`` unambiguously (type tags, lengths, array dtypes and shapes;
+    a container of plain Python scalars as its ``repr``, which tells their types apart)."""
     if obj is None or isinstance(obj, (bool, int, float, str, np.generic)):
         h.update(f"{type(obj).__name__}:{obj!r};".encode())
     elif isinstance(obj, np.ndarray):
@@ -63,11 +71,18 @@ def _feed(h, obj) -> None:
         h.update(f"nd:{a.dtype.str}:{a.shape};".encode())
         h.update(a.view(np.uint8).reshape(-1) if a.dtype != object else repr(a.tolist()).encode())
     elif isinstance(obj, dict):
+        keys = sorted(obj, key=repr)
+        if _plain(keys) and _plain(obj.values()):
+            h.update(f"pdict:{[(k, obj[k]) for k in keys]!r};".encode())
+            return
         h.update(f"dict:{len(obj)};".encode())
-        for k in sorted(obj, key=repr):
+        for k in keys:
             _feed(h, k)
             _feed(h, obj[k])
     elif isinstance(obj, (list, tuple)):
+        if _plain(obj):
+            h.update(f"pseq:{list(obj)!r};".encode())
+            return
         h.update(f"seq:{len(obj)};".encode())
         for x in obj:
             _feed(h, x)
@@ -80,9 +95,10 @@ def _feed(h, obj) -> None:
         raise TypeError(f"figure inputs: cannot hash a {type(obj).__name__}")
 
 
-def figure_key(name: str, inputs) -> str:
-    """The key (32 hex digits) of the figure file ``name`` drawn from ``inputs``."""
-    h = hashlib.sha256(code_digest().encode())
+def figure_key(name: str, inputs, code: str | None = None) -> str:
+    """The key (32 hex digits) of the figure file ``name`` drawn from ``inputs``; ``code``:
+    :func:`code_digest` if computed already (once for a run's figures)."""
+    h = hashlib.sha256((code or code_digest()).encode())
     _feed(h, name)
     _feed(h, inputs)
     return h.hexdigest()[:32]

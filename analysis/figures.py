@@ -509,16 +509,16 @@ READS = {electrodes: _electrodes_reads, pressure: _pressure_reads, taxels: _taxe
 """Builder → the function returning what it reads (called with the builder's arguments)."""
 
 
-def job_key(name: str, build) -> str | None:
+def job_key(name: str, build, code: str | None = None) -> str | None:
     """The content address of the figure ``name`` that ``build`` (a ``functools.partial`` of a
-    builder) draws: :func:`.figure_reuse.figure_key` of what it reads; None for a builder
-    without an entry in :data:`READS`."""
+    builder) draws: :func:`.figure_reuse.figure_key` of what it reads (``code``: its
+    ``code_digest``, if computed already); None for a builder without an entry in :data:`READS`."""
     reads = READS.get(getattr(build, "func", None))
     if reads is None:
         return None
     from .figure_reuse import figure_key
     try:
-        return figure_key(name, reads(*build.args, **build.keywords))
+        return figure_key(name, reads(*build.args, **build.keywords), code)
     except TypeError as e:                       # an input of a type the hash does not know: drawn every time
         log.warning("figures: %s has no content address (%s); it is drawn every time", name, e)
         return None
@@ -603,7 +603,9 @@ class FigureWriter:
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.jobs, self.left_out = figure_jobs(a, model, cfg)
         self.names = [name for name, _ in self.jobs]
-        self.keys = {name: job_key(name, build) for name, build in self.jobs}
+        from .figure_reuse import code_digest
+        code = code_digest()
+        self.keys = {name: job_key(name, build, code) for name, build in self.jobs}
         self.reused = []
         if earlier:
             from .figure_reuse import link
