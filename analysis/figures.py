@@ -455,6 +455,75 @@ def flow_label(a, model, label: str, panels, rows: dict):
     return fig
 
 
+# ----------------------------------------------------------------------------- what each figure reads
+# Every value a builder draws from, for its content address (:mod:`.figure_reuse`): two figures
+# with the same inputs and drawing code are the same file. A builder added without an entry in
+# READS gets no key (always drawn); one that reads something more must list it here.
+def _common(a) -> dict:
+    return {"fingers": list(a.run.fingers), "contacts": list(a.contacts), "time": a.run.time}
+
+
+def _segment_spans(a) -> list:
+    return [(sg.finger, sg.label, sg.start, sg.stop) for sg in a.segments]
+
+
+def _electrodes_reads(a) -> dict:
+    return {**_common(a), "envelope": a.prepared.envelope}
+
+
+def _pressure_reads(a) -> dict:
+    return {**_common(a), "pressure": a.prepared.pressure, "pressure_name": a.prepared.pressure_name,
+            "scheme": a.scheme, "segments": _segment_spans(a), "thresholds": dict(a.thresholds),
+            "peaks": {f: ex.peaks for f, ex in a.extrema.items()},
+            "events": [(t, name, str(detail.get("cause", "?"))) for kind in ("reaction", "slip")
+                       for t, name, detail in a.run.events.of_kind(kind)]}
+
+
+def _taxels_reads(a) -> dict:
+    return {**_common(a), "main": _main_finger(a), "envelope": a.prepared.envelope, "segments": _segment_spans(a)}
+
+
+def _ellipsoid_reads(a, model) -> dict:
+    f, k = _main_finger(a)
+    i = int(np.argmax(a.prepared.proxy[:, k]))
+    return {"main": f, "t": float(a.run.time[i]), "activation": np.asarray(a.prepared.activation[i:i + 1, k]),
+            "weights": model.weights, "points": model.mesh.points, "triangles": model.mesh.triangles,
+            "taxels": model.taxels, "sensor": model.sensor.name if model.sensor is not None else None}
+
+
+def _flow_label_reads(a, model, label, panels, rows) -> dict:
+    by_finger, picked, fields = panels
+    views = list(model.plans)
+    shown = [sg for sgs in by_finger.values() for sg in sgs]
+    return {"label": label, "time": a.run.time, "rate": a.run.rate_hz, "noise": model.config.noise,
+            "plans": [(v, p.shape, p.mm_per_px, p.cols, p.rows, p.mask) for v, p in model.plans.items()],
+            "by_finger": {f: [(sg.id, sg.finger, sg.feature, sg.start, sg.stop) for sg in sgs]
+                          for f, sgs in by_finger.items()},
+            "picked": [(sg.id, s, e, {v: cf.views[v].frames[(s + e - 1) // 2] for v in views if v in cf.views})
+                       for sg, cf, s, e in picked],
+            "fields": fields, "rows": {sg.id: (rows.get(sg.id) or {}).get("flows", {}) for sg in shown}}
+
+
+READS = {electrodes: _electrodes_reads, pressure: _pressure_reads, taxels: _taxels_reads,
+         ellipsoid: _ellipsoid_reads, flow_label: _flow_label_reads}
+"""Builder → the function returning what it reads (called with the builder's arguments)."""
+
+
+def job_key(name: str, build, code: str | None = None) -> str | None:
+    """The content address of the figure ``name`` that ``build`` (a ``functools.partial`` of a
+    builder) draws: :func:`.figure_reuse.figure_key` of what it reads (``code``: its
+    ``code_digest``, if computed already); None for a builder without an entry in :data:`READS`."""
+    reads = READS.get(getattr(build, "func", None))
+    if reads is None:
+        return None
+    from .figure_reuse import figure_key
+    try:
+        return figure_key(name, reads(*build.args, **build.keywords), code)
+    except TypeError as e:                       # an input of a type the hash does not know: drawn every time
+        log.warning("figures: %s has no content address (%s); it is drawn every time", name, e)
+        return None
+
+
 def plan(a, cfg) -> tuple[list[tuple[str, list]], list[str]]:
     """The flow figures to draw: [(label, its segments)] in order of first appearance, at most
     ``cfg.max_segment_figures``; and the labels left out by that cap."""
@@ -503,10 +572,11 @@ def _save(fig, path: Path) -> None:
         fig.savefig(path, dpi=DPI)
 
 
-def make_all(a, model, out_dir: Path, cfg, workers: int = 1) -> tuple[list[str], list[str]]:
+def make_all(a, model, out_dir: Path, cfg, workers: int = 1, earlier: dict | None = None
+             ) -> tuple[list[str], list[str]]:
     """Write every figure into ``out_dir`` (:class:`FigureWriter`). Returns the file names and the
     segment labels whose flow figure the cap ``max_segment_figures`` left out."""
-    with FigureWriter(a, model, out_dir, cfg, workers) as writer:
+    with FigureWriter(a, model, out_dir, cfg, workers, earlier) as writer:
         return writer.result()
 
 
@@ -519,15 +589,35 @@ class FigureWriter:
     one while the caller goes on (writing ``analysis.zarr``), or here in :meth:`result` with
     one worker or where the platform cannot fork. The files are the same bytes either way.
 
+    ``earlier``: figure key → a file drawn before with that key (:func:`.figure_reuse.earlier_figures`
+    of the run): a figure whose key (:func:`job_key`) is there is linked from it, not drawn.
+    ``keys`` (file name → key or None) and ``reused`` (the file names linked) say what was done.
+
     Use as a context manager: leaving it normally waits for every figure; leaving it on an
     error or an interrupt cancels the pool and ends its workers (SIGKILL) before returning, so
     ``out_dir`` can be removed safely and no worker outlives the analysis. So does an interrupt
     while the workers are being started (else the exit would wait for them forever)."""
 
-    def __init__(self, a, model, out_dir: Path, cfg, workers: int = 1):
+    def __init__(self, a, model, out_dir: Path, cfg, workers: int = 1, earlier: dict | None = None):
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.jobs, self.left_out = figure_jobs(a, model, cfg)
+        self.names = [name for name, _ in self.jobs]
+        from .figure_reuse import code_digest
+        code = code_digest()
+        self.keys = {name: job_key(name, build, code) for name, build in self.jobs}
+        self.reused = []
+        if earlier:
+            from .figure_reuse import link
+            for name, _ in self.jobs:
+                src = earlier.get(self.keys[name])
+                try:
+                    if src is not None:
+                        link(src, self.out_dir / name)
+                        self.reused.append(name)
+                except OSError as e:             # removed meanwhile, unreadable: drawn instead
+                    log.info("figures: %s not reused from %s (%s); drawn", name, src, e)
+            self.jobs = [(name, build) for name, build in self.jobs if name not in self.reused]
         self.pool, self.futures = None, []
         workers = min(workers, len(self.jobs))
         if workers > 1 and "fork" in multiprocessing.get_all_start_methods():
@@ -562,7 +652,7 @@ class FigureWriter:
                     _save(build(), self.out_dir / name)
             finally:
                 agg_canvas.clear_text_cache()    # a run's figures share their labels, not the next run's
-        return [name for name, _ in self.jobs], self.left_out
+        return list(self.names), self.left_out
 
     def __enter__(self):
         return self

@@ -31,6 +31,7 @@ from tactile_flow.runstore.catalogue import register_quietly
 from tactile_flow.runstore.provenance import code_identity, git_state
 from tactile_flow.tactile import warmup
 
+from . import figure_reuse
 from . import figures as figs
 from . import results
 from . import score as scoring
@@ -146,7 +147,7 @@ def _analyse_and_write(store_path: Path, cfg, console, name, force, sensor=None)
     model = get_model(cfg.tactile, run.sensor)
     with long_lived_frozen():
         return _analyse(store_path, run, model, cfg, console, signals_before,
-                        {"name": name, "key": key, "key_parts": key_parts}, replace=kept is not None)
+                        {"name": name, "key": key, "key_parts": key_parts}, replace=kept is not None, redraw=force)
 
 
 def _reuse(run_dir: Path, name: str, kept: Path, console) -> dict:
@@ -161,7 +162,9 @@ def _reuse(run_dir: Path, name: str, kept: Path, console) -> dict:
 
 
 def _analyse(store_path: Path, run, model, cfg, console, signals_before: int, naming: dict,
-             replace: bool = False) -> dict:
+             replace: bool = False, redraw: bool = False) -> dict:
+    """Compute the analysis and commit it; its figures are linked from an earlier analysis of the
+    run where their inputs are the same (:mod:`.figure_reuse`), all drawn with ``redraw``."""
     a = analyse(run, cfg, model)
     run_dir = store_path.parent
     analysis_id = uuid.uuid4().hex
@@ -194,8 +197,9 @@ def _analyse(store_path: Path, run, model, cfg, console, signals_before: int, na
     with analyses.staging(run_dir) as staging:
         try:
             # with several workers the figures are drawn in forked processes while this one writes
-            with (figs.FigureWriter(a, model, staging / "figures", cfg, cfg.workers or warmup.available_cores())
-                  if cfg.figures else contextlib.nullcontext()) as drawing:
+            earlier = {} if redraw or not cfg.figures else figure_reuse.earlier_figures(run_dir)
+            with (figs.FigureWriter(a, model, staging / "figures", cfg, cfg.workers or warmup.available_cores(),
+                                    earlier) if cfg.figures else contextlib.nullcontext()) as drawing:
                 tree = results.to_tree(a, list(model.plans), {"analysis_id": analysis_id,
                                                               "provenance": json.loads(results.dumps(provenance))},
                                        fields=cfg.save_fields)
@@ -216,19 +220,24 @@ def _analyse(store_path: Path, run, model, cfg, console, signals_before: int, na
                     "run_id": run.attrs.get("run_id"), "input_sha256": run.input_sha256,
                     "config": effective, "code": naming["key_parts"]["code"], "headline": summary["headline"],
                     "figures": bool(cfg.figures), **({"forced": True} if replace else {})}
+            if drawing is not None:
+                meta[figure_reuse.KEY_FIELD] = {n: k for n, k in drawing.keys.items() if k is not None}
+                meta["figures_reused"] = drawing.reused
             analyses.commit(run_dir, staging, naming["name"], meta, replace=replace)
         except BaseException:
             inflight.settle()                    # an interrupt may have left zarr writing into it
             raise
     if (run_dir / "run.json").is_file():
         register_quietly(run_dir, console)      # the catalogue shows its current analysis
-    _report(console, run_dir, summary, score)
+    _report(console, run_dir, summary, score, drawing.reused if drawing is not None else [])
     return json.loads(text)
 
 
-def _report(console, run_dir, summary, score) -> None:
+def _report(console, run_dir, summary, score, reused=()) -> None:
     h = summary["headline"]
     msg = f"analysis {run_dir}: {h['segments']} segments, {h['skipped']} skipped"
+    if reused:
+        msg += f"; {len(reused)} of {len(summary['figures'])} figures as drawn before (same inputs)"
     if h.get("status") == "no_contact":
         msg += " (no contact found: nothing to segment)"
     if score is not None:

@@ -234,7 +234,9 @@ def estimate(cf, activation, start: int, stop: int, model, cfg, time=None, valid
     evidence["direction"] = {"direction_deg": direction, "agreement": agreement}
     when = _onset(pm, end, turned, slip_class)
     if when is not None and raw is not None:
-        _release(when, np.asarray(raw[ref:ref + end], float), pm.reference_frames, rate)
+        seg = np.asarray(activation[ref:ref + end], float)
+        _release(when, np.asarray(raw[ref:ref + end], float), pm.reference_frames, rate,
+                 seg[when["slip_frame"]] - seg[when["motion_frame"]])
     evidence["onset"] = when
     if slip_class in ("translation", "rotation") and when is not None and time is not None:
         out["slip_onset_s"] = float(time[ref + when["slip_frame"]])
@@ -305,7 +307,7 @@ def _rotation_evidence(cf, views, ref, stop, model, pm, end, moving) -> tuple[di
     if per_frame is not None and len(per_frame) > 1:
         dynamic = float(per_frame.sum())
         moving_frames = int(np.count_nonzero(per_frame))
-    static = None
+    static = series = None
     if cf.reference is not None:
         series = static_rotation_series(cf, views, ref, stop, model)
         if series is not None and len(series):
@@ -315,8 +317,27 @@ def _rotation_evidence(cf, views, ref, stop, model, pm, end, moving) -> tuple[di
     both = [v for v in (dynamic, static) if v is not None]
     evidence = {"rotation_deg": float(np.mean(both)) if both else None, "dynamic_deg": dynamic,
                 "moving_frames": moving_frames,
-                "static_deg": static, "pattern_turn_deg": turn, "pattern_elongation": pm.elongation}
+                "static_deg": static, "pattern_turn_deg": turn, "pattern_elongation": pm.elongation,
+                "peak_deg": _peak_turn(per_frame, series)}
     return evidence, (None if per_frame is None else np.r_[0.0, np.cumsum(per_frame)])
+
+
+def _peak_turn(per_frame, series, q: float = 90.0) -> float | None:
+    """How far the pattern turned (deg, signed), not where it ended: the ``q``-th percentile of
+    |the mean of the summed dynamic rotation and the static rotation since the reference|, frame
+    by frame, with the sense of its largest excursion (the turn's analogue of
+    ``slip_displacement_mm``; recorded as evidence, not used by the decision: on the simulated
+    grids it recognises every rotation of the SP's classic grid but reads more pulls as twists,
+    docs/analysis.md)."""
+    if per_frame is None or series is None:
+        return None
+    summed = np.r_[0.0, np.cumsum(per_frame)]
+    n = min(len(summed), len(series))
+    if n < 2:
+        return None
+    r = 0.5 * (summed[:n] + series[:n])
+    k = int(np.argmax(np.abs(r)))
+    return float(np.sign(r[k]) * np.percentile(np.abs(r), q))
 
 
 def _direction(motion: dict, evidence: dict) -> tuple[float | None, float | None]:
@@ -376,20 +397,28 @@ def _onset(pm, end: int, turned, slip_class: str | None) -> dict | None:
             "rise": k.rise, "dated_by": "knee"}
 
 
-def _release(when: dict, raw, n_ref: int, rate: float) -> None:
+def _release(when: dict, raw, n_ref: int, rate: float, along=None) -> None:
     """Date gross slip by the skin's release (in place in ``when``): when the whole contact breaks
-    away, the stretch the stuck skin had built up is let go at once and the traction falls to the
-    kinetic level, so the load the stretch put on the electrodes ahead of it falls within a few
-    frames (the first tooth of the stick-slip; ``tactile.slip``'s ``release`` criterion sees the
-    same thing live). On the unsmoothed activation's positive change since the reference window,
-    running-median filtered over 3 frames, the first fall after the motion onset, from a new
-    high at least :data:`RELEASE_HEIGHT` of the way up to the window's highest load, by at least
-    :data:`RELEASE_SHARE` of the rise so far and :data:`RELEASE_NOISE` × its frame-to-frame noise
-    marks it (a press that settles, or the holder's wander, lowers the load too, but not from
-    the top of a stretch): the slip onset is the frame before the fall (uncertainty: the fall's length). Without
-    such a fall the knee stands."""
+    away, the stretch (or twist) the stuck skin had built up is let go at once and the traction
+    (torque) falls to the kinetic level, so the electrode change the stuck skin made — loading
+    ahead of the drag, unloading behind it; for a twist two opposite quadrants of the contact —
+    falls back along its own pattern within a few frames (the first tooth of the stick-slip;
+    ``tactile.slip``'s ``release`` criterion sees the same thing live). That pattern is
+    ``along`` (n,) kΩ: the smoothed activation's change from the motion onset to the knee; the
+    unsmoothed activation's change since the reference window is projected on it (without it:
+    its total positive change, which sees only the loading side and little of a twist, whose
+    loads and unloads nearly cancel), running-median filtered over 3 frames. The first fall
+    after the motion onset, from a new high at least :data:`RELEASE_HEIGHT` of the way up to the
+    window's highest, by at least :data:`RELEASE_SHARE` of the rise so far and
+    :data:`RELEASE_NOISE` × its frame-to-frame noise marks it (a press that settles, or the
+    holder's wander, lowers the load too, but not from the top of a stretch): the slip onset is
+    the frame before the fall (uncertainty: the fall's length). Without such a fall the knee
+    stands."""
     ref = raw[:n_ref].mean(axis=0)
-    load = np.clip(raw - ref, 0.0, None).sum(axis=1)
+    if along is not None and np.all(np.isfinite(along)) and np.any(along):
+        load = (raw - ref) @ (along / np.linalg.norm(along))
+    else:
+        load = np.clip(raw - ref, 0.0, None).sum(axis=1)
     if len(load) < 8:
         return
     smooth = np.array([np.median(load[max(0, i - 1):i + 2]) for i in range(len(load))])

@@ -15,7 +15,8 @@ per finger and grasp file) and counts how many read as touch.
 
 Each sensor model of ``--sensor`` (``conf/sensor/``; by default the BioTac SP and the classic
 BioTac, docs/sensors.md) runs the grid with its own fingertips, and its lines and tables are
-headed by its name. Prints JSON lines (per condition cell: tare/no tare × light/firm; the totals; the onset; the
+headed by its name. Prints JSON lines (per run: the truth, what it was read as, its displacement and rotation
+evidence, the onset's error; per condition cell: tare/no tare × light/firm; the totals; the onset; the
 real touches), then markdown tables (docs/analysis.md):
 
 - the confusion matrix of the shipped estimate over the true motion (each translation
@@ -25,8 +26,10 @@ real touches), then markdown tables (docs/analysis.md):
   direction of translations from ``motion`` (the centre of pressure since the first settled
   frames), ``cop_unloaded``, ``static_unloaded`` (negated), ``static_onset``, ``dynamic``; the
   rotation from ``rotation_dynamic``, ``rotation_static``, ``rotation_turn`` (the pattern's
-  second moments) or both averaged (shipped) — each class's share read right;
-- the slip onset's error against the truth's (ms): within 50 ms, median, 90th percentile.
+  second moments), ``rotation_peak`` (the 90th percentile of the turn over the contact, not its
+  end) or the two flows averaged (shipped) — each class's share read right;
+- the slip onset's error against the truth's (ms): within 50 ms, median, 90th and 95th percentiles of
+  its magnitude.
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 DIRECTION_SOURCES = ("motion", "cop_unloaded", "static_unloaded", "static_onset", "dynamic")
-ROTATION_SOURCES = ("rotation_mean", "rotation_dynamic", "rotation_static", "rotation_turn")
+ROTATION_SOURCES = ("rotation_mean", "rotation_dynamic", "rotation_static", "rotation_turn", "rotation_peak")
 SIGN = {"static_unloaded": -1.0}
 
 
@@ -122,7 +125,8 @@ def source_direction(est, source):
 def source_rotation(est, source):
     rot = est["evidence"].get("rotation") or {}
     key = {"rotation_mean": "rotation_deg", "rotation_dynamic": "dynamic_deg", "rotation_static": "static_deg",
-           "rotation_turn": "pattern_turn_deg"}[source]
+           "rotation_turn": "pattern_turn_deg",
+           "rotation_peak": "peak_deg"}[source]
     return rot.get(key)
 
 
@@ -167,7 +171,8 @@ def summarise(rows, cfg, bins) -> dict:
     out["onset"] = {"slips": slips, "dated": len(errs),
                     "within_50ms": (float(np.sum(np.abs(errs) <= 50.0)) / slips) if slips else None,
                     "median_ms": float(np.median(errs)) if errs else None,
-                    "abs_q90_ms": float(np.percentile(np.abs(errs), 90)) if errs else None}
+                    "abs_q90_ms": float(np.percentile(np.abs(errs), 90)) if errs else None,
+                    "abs_q95_ms": float(np.percentile(np.abs(errs), 95)) if errs else None}
     return out
 
 
@@ -189,6 +194,29 @@ def markdown_confusion(labels, counts) -> str:
             continue
         lines.append(f"| {t} | " + " | ".join(str(counts[(t, r)] or "·") for r in cols)
                      + f" | {counts[(t, t)]}/{n} |")
+    return "\n".join(lines)
+
+
+def spurious_turns(rows, bins) -> str:
+    """Markdown: what the pulls' rotation evidence reads per mm of displacement (deg/mm, median
+    and range over the pulls of each direction): a pull has no turn, so this is the flows' own
+    spurious turn, the noise the rotation decision must rise above."""
+    per = defaultdict(lambda: defaultdict(list))
+    for c, tr, est in rows:
+        if c.motion != "translate" or not est or not est.get("slip_displacement_mm"):
+            continue
+        rot, d = est["evidence"].get("rotation") or {}, est["slip_displacement_mm"]
+        b = min(bins, key=lambda x: angle_error(c.direction_deg, x)) % 360
+        for key in ("dynamic_deg", "static_deg", "rotation_deg"):
+            if rot.get(key) is not None:
+                per[b][key].append(rot[key] / d)
+    cell = lambda v: f"{np.median(v):+.2f} ({min(v):+.2f}…{max(v):+.2f})" if v else "–"  # noqa: E731
+    lines = ["\n| pull direction | pulls | dynamic flow, deg/mm | static flow, deg/mm | their mean (shipped), deg/mm |",
+             "| --- | --- | --- | --- | --- |"]
+    for b in sorted(per):
+        p = per[b]
+        lines.append(f"| {b:.0f}° | {len(p['rotation_deg'])} | {cell(p['dynamic_deg'])} | {cell(p['static_deg'])} | "
+                     f"{cell(p['rotation_deg'])} |")
     return "\n".join(lines)
 
 
@@ -239,8 +267,11 @@ def bench(args, sensor: str) -> None:
         for c, store in runs(args.out, args.grid, noise, args.quick, sensor):
             tr, est = evaluate(store, model, cfg)
             everything.append((noise, c, tr, est))
+            rot = ((est or {}).get("evidence") or {}).get("rotation") or {}
             print(json.dumps({"sensor": sensor, "run": c.name, "noise": noise, "truth": true_label(c, bins),
                               "read": read_label(*reread(est, cfg.slip), bins),
+                              "displacement_mm": (est or {}).get("slip_displacement_mm"),
+                              **{k: rot.get(k) for k in ("dynamic_deg", "static_deg", "peak_deg")},
                               "onset_error_ms": None if not est or est.get("slip_onset_s") is None
                               or not math.isfinite(tr.get("true_slip_onset_s", float("nan")))
                               else round(1e3 * (est["slip_onset_s"] - tr["true_slip_onset_s"]), 1)}),
@@ -272,10 +303,12 @@ def bench(args, sensor: str) -> None:
             continue
         print(f"| {name} | {fmt(r.get('translate'))} | {fmt(r.get('rotate'))} | {fmt(r.get('none'))} | "
               f"{fmt(r.get('touch_vs_slip'))} | {fmt(r.get('rotation_sense'))} | {fmt(r.get('rotation_recognised'))} |")
+    print(spurious_turns(rows, bins))
     o = total["onset"]
     print(f"\nslip onset: {o['dated']} of {o['slips']} slips dated; within 50 ms of the truth: {fmt(o['within_50ms'])}; "
           f"median error {o['median_ms'] if o['median_ms'] is None else round(o['median_ms'], 1)} ms; "
-          f"90th percentile of |error| {o['abs_q90_ms'] if o['abs_q90_ms'] is None else round(o['abs_q90_ms'], 1)} ms")
+          f"90th percentile of |error| {o['abs_q90_ms'] if o['abs_q90_ms'] is None else round(o['abs_q90_ms'], 1)} ms; "
+          f"95th {o['abs_q95_ms'] if o['abs_q95_ms'] is None else round(o['abs_q95_ms'], 1)} ms")
     if touch:
         for kind, r in touch.items():
             print(f"real touches ({kind}): {r['records']} records, read as touch {fmt(r['touch_rate'])} ({r['read_as']})")

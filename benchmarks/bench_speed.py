@@ -6,7 +6,10 @@
 - ``analysis``: CPU of ``analyze_run`` (one worker, figures on) of the 60 s five-finger store
   of ``bench_analysis.py`` against the bare dynamic Farnebäck calls on the same frames, each
   repetition paired (ratio = analysis CPU / bare flow CPU); the figures' CPU alone, and the
-  ratio without them.
+  ratio without them. Each repetition analyses a fresh copy of the store (its first analysis);
+  then analyses it again under another name with the same inputs (a new version of the
+  analysis code would do the same): its figures are linked from the first, not drawn
+  (``analysis/figure_reuse.py``), and that ratio is reported too.
 - ``farneback``: CPU per flow of the same record's frames, OpenCV's call against
   ``tactile.farneback`` (each frame expanded once), consecutive pairs (dynamic) and pairs from
   one reference (static), paired within each repetition; the flows are checked equal.
@@ -88,11 +91,17 @@ def bench_analysis(store: Path, work: Path, repeat: int) -> None:
     cfg = load_config({"progress": False, "workers": 1})
     get_model(cfg.tactile)
     analyze_run(fresh(store, work, "warm"), {"progress": False, "figures": False}, console=QUIET)   # numba, caches
-    full, bare, ratio, figs = [], [], [], []
+    full, bare, ratio, figs, again = [], [], [], [], []
     for i in range(repeat):
+        run, settings = fresh(store, work, f"a{i}"), {"progress": False, "workers": 1, "figures": True}
         t0 = time.process_time()
-        analyze_run(fresh(store, work, f"a{i}"), {"progress": False, "workers": 1, "figures": True}, console=QUIET)
+        analyze_run(run, settings, console=QUIET)
         full.append(time.process_time() - t0)
+        t0 = time.process_time()
+        s = analyze_run(run, settings, name="again", console=QUIET)                # its figures as drawn before
+        again.append(time.process_time() - t0)
+        assert len(s["figures"]) == len(json.loads((run.parent / "analyses" / "again" / "analysis.json").read_text())
+                                        ["figures_reused"]), "the re-analysis drew figures"
         bare.append(bare_dynamic_cpu(store, cfg))
         ratio.append(full[-1] / bare[-1])
         a = analyse(load_run(store), cfg, get_model(cfg.tactile))
@@ -106,6 +115,8 @@ def bench_analysis(store: Path, work: Path, repeat: int) -> None:
     emit(stats("figures_cpu_s", figs))
     emit(stats("analysis_without_figures_over_bare_dynamic_ratio", [(f - g) / b for f, g, b in zip(full, figs, bare)],
                paired=True))
+    emit(stats("reanalysis_figures_reused_over_bare_dynamic_ratio", [r / b for r, b in zip(again, bare)], paired=True,
+               target=1.3))
 
 
 def bench_farneback(store: Path, repeat: int) -> None:

@@ -220,18 +220,18 @@ def commit_lock(run_dir):
 def staging(run_dir):
     """A new ``analyses/.staging-<id>/`` to write an analysis into, with its own lock held (so
     that another process's :func:`remove_debris` leaves it alone); removed on any exception."""
-    path = analyses_dir(run_dir) / f"{STAGING}{uuid.uuid4().hex[:12]}"
-    for attempt in range(2):
-        files.make_dirs(run_dir, ANALYSES)
-        try:
-            path.mkdir()
-            break
-        except FileNotFoundError:           # another process's interrupted analysis removed analyses/
-            if attempt:
-                raise
     fd = None
+    for attempt in range(3):
+        path = analyses_dir(run_dir) / f"{STAGING}{uuid.uuid4().hex[:12]}"
+        try:
+            files.make_dirs(run_dir, ANALYSES)
+            path.mkdir()
+            fd = os.open(path / ".lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+            break
+        except FileNotFoundError:           # another process's remove_debris took analyses/ or our empty
+            if attempt == 2:                # directory before its lock was made (:func:`_abandoned`)
+                raise
     try:
-        fd = os.open(path / ".lock", os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
         fcntl.flock(fd, fcntl.LOCK_EX)
         yield path
     except BaseException:
@@ -395,9 +395,9 @@ def _abandoned(staged: Path) -> bool:
     lock = staged / ".lock"
     try:
         fd = os.open(lock, os.O_RDONLY | os.O_NOFOLLOW)
-    except FileNotFoundError:
+    except FileNotFoundError:               # killed between the directory and its lock: empty
         try:
-            return time.time() - staged.stat().st_mtime > STALE_STAGING_S
+            return not any(staged.iterdir()) or time.time() - staged.stat().st_mtime > STALE_STAGING_S
         except OSError:
             return False
     except OSError:

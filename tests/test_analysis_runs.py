@@ -12,6 +12,7 @@ import pytest
 import xarray as xr
 
 from tactile_flow.analysis.load import AnalysisInputError
+from tactile_flow.runstore import analyses
 from tactile_flow.analysis.run import analyze_run
 
 BIN = Path(sys.executable).parent
@@ -230,3 +231,38 @@ def test_sweeps_and_pour_write_only_documented_fields(runs, tmp_path):
     for proto, store in runs.items():
         summary = analyze_run(_copy(store, tmp_path, proto), {"progress": False}, console=lambda *a: None)
         assert undocumented(summary) == [], proto
+
+
+def _figures(analysis_dir: Path) -> dict:
+    return {p.name: p.read_bytes() for p in (analysis_dir / "figures").iterdir()}
+
+
+def test_a_reanalysis_links_the_figures_whose_inputs_it_shares_and_they_are_as_drawn_afresh(runs, tmp_path):
+    """A second analysis of a run (another name, another config) links the figures whose inputs
+    are unchanged from the earlier one and draws the others; every file is byte for byte what
+    an analysis with that config draws on a run never analysed; force=true draws them all."""
+    store = _copy(runs["straws_sweep"], tmp_path, "again")
+    base = {"progress": False, "figures": True, "workers": 1, "max_segment_figures": 2}
+    analyze_run(store, base, name="first", console=lambda *a: None)
+    kept = store.parent / "analyses"
+    changes = {"flow": {"flow": {"winsize": 11}},                           # the flow figures change
+               "segments": {"segmentation": {"plateau_level": 0.45}}}      # the segments change too
+    for tag, change in changes.items():
+        lines = []                                     # the second one draws what changed in 2 forked workers
+        analyze_run(store, {**base, **change, "workers": 1 if tag == "flow" else 2}, name=tag, console=lines.append)
+        fresh = _copy(runs["straws_sweep"], tmp_path, f"fresh_{tag}")
+        analyze_run(fresh, {**base, **change}, name=tag, console=lambda *a: None)
+        assert _figures(kept / tag) == _figures(fresh.parent / "analyses" / tag), tag
+        reused = analyses.read_meta(kept / tag)["figures_reused"]
+        assert reused and len(reused) < len(_figures(kept / tag)), (tag, reused)
+        assert f"{len(reused)} of {len(_figures(kept / tag))} figures as drawn before" in lines[-1]
+        for name in _figures(kept / tag):              # a reused file is the earlier file (a hard link)
+            same = (kept / tag / "figures" / name).stat().st_ino == (kept / "first" / "figures" / name).stat().st_ino
+            assert same == (name in reused), (tag, name)
+    assert "electrodes.png" in analyses.read_meta(kept / "segments")["figures_reused"]    # no segments drawn on it
+    assert "pressure.png" not in analyses.read_meta(kept / "segments")["figures_reused"]
+    assert {n for n in _figures(kept / "flow") if n.startswith("flow_")}.isdisjoint(
+        analyses.read_meta(kept / "flow")["figures_reused"])
+    before = _figures(kept / "flow")
+    analyze_run(store, {**base, **changes["flow"]}, name="flow", force=True, console=lambda *a: None)
+    assert analyses.read_meta(kept / "flow")["figures_reused"] == [] and _figures(kept / "flow") == before

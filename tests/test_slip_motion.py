@@ -90,3 +90,24 @@ def test_circular_mean_of_two_headings_is_not_their_vector_mean():
     assert mean == pytest.approx(10.0) and spread == pytest.approx(0.0, abs=1e-6)
     assert circular_mean_deg([0.0, 180.0]) == (None, None)          # opposite: no mean direction
     assert circular_mean_deg([]) == (None, None)
+
+
+def test_a_twists_release_is_dated_along_the_pattern_the_stuck_skin_built_up():
+    """A twist loads two opposite quadrants and unloads the others: the total positive load
+    barely sees it (here the press still loading swamps it), but the raw change projected on the
+    twist's own pattern falls when the skin breaks away (frame 60)."""
+    from tactile_flow.analysis.slip import _release
+    rng = np.random.default_rng(3)
+    base = blob((0.0, 0.0), sigma=(4.0, 2.5))
+    twist = 3.0 * (blob((0.0, 0.0), sigma=(4.0, 2.5), angle_deg=8.0) - base)
+    frames = []
+    for i in range(120):
+        held = 0.0 if i < 20 else ((i - 20) / 40 if i < 60 else 0.6 + 0.01 * (i - 60))  # stuck, then released to 60 %
+        frames.append((1.0 + 0.01 * min(i, 80)) * base + held * twist + rng.normal(0.0, 0.05, len(base)))
+    raw = np.stack(frames)
+    knee_only = {"motion_frame": 20, "slip_frame": 52, "uncertainty_frames": 1.0}
+    _release(knee_only, raw, 20, 100.0)
+    assert "dated_by" not in knee_only                          # the total load shows no release
+    along = {"motion_frame": 20, "slip_frame": 52, "uncertainty_frames": 1.0}
+    _release(along, raw, 20, 100.0, twist)
+    assert along["dated_by"] == "release" and abs(along["slip_frame"] - 60) <= 3
