@@ -7,8 +7,9 @@
 
 ``run=`` names run stores: a ``run.zarr``, a directory (every ``run.zarr`` below it), a
 shell-style pattern (``*``, ``?``, ``**`` for any depth; :func:`find_stores`), or a list of
-these (``run=[A,B]``). Without ``-m`` they are analysed one after another in this process;
-with ``-m`` they become jobs (:func:`runs_as_jobs`), ``batch=N`` runs each, for any Hydra
+these (``run=[A,B]``). Without ``-m`` they are analysed in ``workers`` processes forked
+from this one (default: the cores available; the start-up paid once per process), with one
+progress line; with ``-m`` they become jobs (one process each unless ``workers=`` is given) (:func:`runs_as_jobs`), ``batch=N`` runs each, for any Hydra
 launcher. Each job leaves its result on disk (:mod:`cliapp.jobresults`).
 
 Exit status: 0 analysed, 2 bad input or config (nothing written), 1 analysis failed, 3
@@ -37,6 +38,7 @@ from hydra.types import RunMode
 import tactile_flow.cliapp.jobresults as jobresults
 from tactile_flow.cliapp.runner import signals_received
 from tactile_flow.cliapp.sensors import composed_sensor
+from tactile_flow.cliapp.workers import resolve_workers
 from tactile_flow.validation import ConfigError
 from tactile_flow.conf import DIR as CONF_DIR
 from tactile_flow.runstore import files
@@ -88,45 +90,124 @@ def table_dir(spec: str) -> Path:
 
 def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
                   table: bool = True, name: str | None = None, force: bool = False,
-                  sensor=None) -> tuple[int, list[dict]]:
+                  sensor=None, workers: int = 1) -> tuple[int, list[dict]]:
     """Analyse the run stores ``spec`` names (:func:`find_stores`) into analyses called ``name``
     (default: their key, :func:`analysis.run.default_name`); never raises. The exit code and
     one row per run (``run``, ``analysis`` (its name), ``result``, then the summary's
     ``headline``); with ``table`` and several runs, their table is written (:func:`table_dir`).
     ``sensor``: the :class:`tactile.sensor.SensorModel` asked for (``sensor=``); a store
-    recorded with another is refused (bad input), the others analysed."""
-    from .run import analyze_run
+    recorded with another is refused (bad input), the others analysed.
+
+    Several runs are spread over ``workers`` processes forked from this one
+    (:mod:`cliapp.workers`: the start-up paid once per process), each analysis in one process
+    (``analysis.workers`` 1 unless given) and without its own progress bars: one progress line
+    of runs done, total and rate (on a terminal), each run's lines printed as it ends. The
+    results are the same with any number of workers; the rows keep the stores' order."""
+    from tactile_flow.cliapp.progress import progress_bar
+    from tactile_flow.cliapp.workers import WorkerDied, each_in_workers
+    from tactile_flow.runstore.provenance import same_code
+
+    from .run import analyze_run  # noqa: F401 - loaded here, before any worker is forked
     stores = find_stores(spec) if spec else []
     if not stores:
         print(f"error: run={spec}: no run.zarr found; expected a run.zarr, a directory or a pattern of runs",
               file=sys.stderr)
         return BAD_INPUT, []
-    code, rows = 0, []
-    for store in stores:
-        row = {"run": str(store), "analysis": name or ""}
-        rows.append(row)
-        try:
-            summary = analyze_run(store, analysis_cfg, name=name, force=force, console=console, sensor=sensor)
-            row["analysis"] = summary.get("analysis") or row["analysis"]
-            row["result"] = "analysed"
-            row.update(summary.get("headline", {}))
-        except (AnalysisInputError, ConfigError, PathOutsideRoot, RunDirBusy, AnalysisNameTaken) as exc:
-            _report(exc, "error", verbose)   # bad input: a planted link, a name, a directory in use, another sensor
-            row["result"] = f"error: {exc}"
-            code = max(code, BAD_INPUT)
-        except Exception as exc:  # noqa: BLE001 - one line per failed run, keep going
-            if signals_received():  # a Ctrl-C cut a library's code short and its cleanup raised this
-                _quiet_after_interrupt()
-                return _interrupted(store, rows)
-            _report(exc, f"analysis of {store} failed", verbose)
-            row["result"] = f"failed: {type(exc).__name__}: {exc}"
-            code = max(code, FAILED)
-        except KeyboardInterrupt:  # Ctrl-C or SIGTERM: stop here; the analysis leaves no partial files
-            _quiet_after_interrupt()
-            return _interrupted(store, rows)
-    if table and len(stores) > 1:
+    if len(stores) == 1:
+        code, row, _ = analyse_one(stores[0], analysis_cfg, verbose, console, name, force, sensor)
+        return code, [row]
+    cfg = _one_process_each(analysis_cfg, workers)
+    code, rows = 0, [None] * len(stores)
+    bar = progress_bar(total=len(stores), unit="run", desc="analyse", dynamic_ncols=True)
+    say = (lambda line: bar.write(line)) if not bar.disable else console
+    jobs = [(store, cfg, verbose, name, force, sensor) for store in stores]
+    try:
+        with same_code(), bar:
+            for i, got in each_in_workers(_analyse_job, jobs, workers):
+                if isinstance(got, BaseException):           # not one of analyse_one's: a bug; one line
+                    got = (FAILED, {"run": str(stores[i]), "analysis": name or "",
+                                    "result": f"failed: {type(got).__name__}: {got}"},
+                           [("err", f"analysis of {stores[i]} failed: {got}")])
+                c, rows[i], lines = got
+                for where, line in lines:
+                    if where == "err":
+                        print(line, file=sys.stderr)
+                    else:
+                        say(line)
+                bar.update(1)
+                code = max(code, c)
+                if c == INTERRUPTED:                         # one process: the analysis caught the Ctrl-C
+                    return INTERRUPTED, [r for r in rows if r is not None]
+    except WorkerDied as exc:
+        print(f"analysis failed: {exc}; the runs analysed are kept: run the same command again to finish "
+              f"(a kept analysis is reused)", file=sys.stderr)
+        code = max(code, FAILED)
+    except KeyboardInterrupt:                 # Ctrl-C or SIGTERM: the workers are ended, nothing partial is left
+        _quiet_after_interrupt()
+        left = [s for s, r in zip(stores, rows) if r is None]
+        print(f"analysis interrupted: {len(stores) - len(left)} of {len(stores)} runs analysed; the same command "
+              f"again analyses the others", file=sys.stderr)
+        return INTERRUPTED, [r for r in rows if r is not None]
+    rows = [r if r is not None else {"run": str(s), "analysis": name or "", "result": "not analysed"}
+            for s, r in zip(stores, rows)]
+    if table:
         write_table(table_dir(spec), rows)
     return code, rows
+
+
+def _one_process_each(analysis_cfg, workers: int):
+    """The analysis config of a run analysed beside others: no progress bars of its own, and
+    beside others in ``workers`` > 1 processes one core each (``analysis.workers`` 1 unless
+    given)."""
+    from omegaconf import OmegaConf
+    if analysis_cfg is None or not OmegaConf.is_config(analysis_cfg):
+        analysis_cfg = OmegaConf.create(analysis_cfg or {})
+    cfg = OmegaConf.create(OmegaConf.to_container(analysis_cfg, resolve=True))
+    if cfg.get("workers") is None and workers > 1:
+        cfg.workers = 1
+    cfg.progress = False
+    return cfg
+
+
+def _analyse_job(job) -> tuple[int, dict, list[tuple[str, str]]]:
+    """:func:`analyse_one` in a worker: its output lines kept (``("out"|"err", line)``) for the
+    parent to print."""
+    store, cfg, verbose, name, force, sensor = job
+    lines: list[tuple[str, str]] = []
+    code, row, _ = analyse_one(store, cfg, verbose, lambda line: lines.append(("out", str(line))), name, force,
+                               sensor, err=lambda line: lines.append(("err", line)))
+    return code, row, lines
+
+
+def analyse_one(store: Path, analysis_cfg, verbose: bool, console, name, force, sensor,
+                err=None) -> tuple[int, dict, None]:
+    """Analyse one store; never raises but for an interrupt's ``KeyboardInterrupt`` turned into
+    the exit code :data:`INTERRUPTED`. ``(exit code, row, None)``; error lines go to ``err``
+    (default: stderr)."""
+    from .run import analyze_run
+    err = err or (lambda line: print(line, file=sys.stderr))
+    row = {"run": str(store), "analysis": name or ""}
+    code = 0
+    try:
+        summary = analyze_run(store, analysis_cfg, name=name, force=force, console=console, sensor=sensor)
+        row["analysis"] = summary.get("analysis") or row["analysis"]
+        row["result"] = "analysed"
+        row.update(summary.get("headline", {}))
+    except (AnalysisInputError, ConfigError, PathOutsideRoot, RunDirBusy, AnalysisNameTaken) as exc:
+        _report(exc, "error", verbose, err)  # bad input: a planted link, a name, a directory in use, another sensor
+        row["result"] = f"error: {exc}"
+        code = BAD_INPUT
+    except Exception as exc:  # noqa: BLE001 - one line per failed run, keep going
+        if signals_received():  # a Ctrl-C cut a library's code short and its cleanup raised this
+            _quiet_after_interrupt()
+            return _interrupted(store, row, err)
+        _report(exc, f"analysis of {store} failed", verbose, err)
+        row["result"] = f"failed: {type(exc).__name__}: {exc}"
+        code = FAILED
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: stop here; the analysis leaves no partial files
+        _quiet_after_interrupt()
+        return _interrupted(store, row, err)
+    return code, row, None
 
 
 def _quiet_after_interrupt() -> None:
@@ -136,16 +217,17 @@ def _quiet_after_interrupt() -> None:
     warnings.filterwarnings("ignore", message=r"coroutine .* was never awaited", category=RuntimeWarning)
 
 
-def _interrupted(store: Path, rows: list[dict]) -> tuple[int, list[dict]]:
-    print(f"analysis of {store} interrupted; analyse it again with tactile-analyze run={store}", file=sys.stderr)
-    rows[-1]["result"] = "interrupted"
-    return INTERRUPTED, rows
+def _interrupted(store: Path, row: dict, err) -> tuple[int, dict, None]:
+    err(f"analysis of {store} interrupted; analyse it again with tactile-analyze run={store}")
+    row["result"] = "interrupted"
+    return INTERRUPTED, row, None
 
 
-def _report(exc: Exception, what: str, verbose: bool) -> None:
+def _report(exc: Exception, what: str, verbose: bool, err=None) -> None:
+    err = err or (lambda line: print(line, file=sys.stderr))
     if verbose:
-        traceback.print_exception(exc)
-    print(f"{what}: {exc}", file=sys.stderr)
+        err("".join(traceback.format_exception(exc)).rstrip("\n"))
+    err(f"{what}: {exc}")
 
 
 def write_table(root: Path, rows: list[dict]) -> None:
@@ -224,11 +306,17 @@ def _app(cfg) -> None:
         _report(exc, "error", bool(cfg.get("verbose")))
         jobresults.record(BAD_INPUT)
         return
+    try:
+        workers = 1 if sweep and cfg.get("workers") is None else resolve_workers(cfg.get("workers"), "workers")
+    except ValueError as exc:
+        _report(exc, "error", False)
+        jobresults.record(BAD_INPUT)
+        return
     code, rows = 0, []
     for spec in (run if OmegaConf.is_list(run) else [run]):
         c, r = analyse_paths(str(spec), cfg.analysis, bool(cfg.get("verbose")), table=not sweep,
                              name=None if cfg.get("name") is None else str(cfg.name), force=bool(cfg.get("force")),
-                             sensor=sensor)
+                             sensor=sensor, workers=workers)
         code, rows = max(code, c), rows + r
         if c == INTERRUPTED:
             break

@@ -6,7 +6,11 @@
 
 Exit status: 0 imported, 2 bad input (one line on stderr naming the file and, for a CSV, the
 line and column; nothing written; for a directory: the good files are imported and every
-bad one gets its line), 1 other failure. A truncated bag imports what it holds
+bad one gets its line: unreadable, duplicate-named, a run directory holding something else,
+mixed sensor models), 1 other failure (a worker killed: the runs completed are in place), 3
+interrupted (Ctrl-C, SIGTERM: the runs completed are in place, no half store). A directory is
+imported in ``workers`` processes (default: the cores available), with one progress line on
+a terminal; a second import of it skips the files already imported and does the others. A truncated bag imports what it holds
 (exit 0) and its output line ends with ``WARNING: truncated bag: ...``. Files are streamed:
 memory does not grow with their length (``docs/import.md``). ``verbose=true`` adds the
 traceback. The work is :func:`importers.import_source`.
@@ -22,6 +26,7 @@ from omegaconf import OmegaConf
 
 from tactile_flow.cliapp.runner import report, run_app
 from tactile_flow.cliapp.sensors import composed_sensor
+from tactile_flow.cliapp.workers import WorkerDied
 from tactile_flow.conf import DIR as CONF_DIR
 from tactile_flow.runstore.status import ExitCode
 
@@ -59,13 +64,17 @@ def run(cfg, overrides=(), console=print) -> int:
         return BAD_INPUT
     try:
         import_source(cfg.source, cfg.out, settings_from(cfg), config_yaml=OmegaConf.to_yaml(cfg, resolve=True),
-                      overrides=overrides, console=console)
+                      overrides=overrides, console=console, workers=cfg.get("workers"), progress=True)
     except ImportIncomplete as exc:                 # the good files are imported; one line per bad one
         for _, reason in exc.failures:
             print(f"import error: {reason}", file=sys.stderr)
         print(f"import: {len(exc.results)} of {len(exc.results) + len(exc.failures)} files imported",
               file=sys.stderr)
         return BAD_INPUT
+    except WorkerDied as exc:                       # kill -9 of a worker: what was complete is in place
+        print(f"import failed: {exc}; the runs completed are in place, the others not: run the same import "
+              f"again to finish it", file=sys.stderr)
+        return FAILED
     except (ImportInputError, FileExistsError, ValueError) as exc:
         report(exc, "import error", bool(cfg.get("verbose")))
         return BAD_INPUT

@@ -248,99 +248,236 @@ class ImportIncomplete(ImportInputError):
 
 
 def import_source(source, out, settings: ImportSettings | None = None, *, config_yaml: str | None = None,
-                  overrides=(), console=None) -> list[ImportResult]:
-    """Import ``source`` into one run directory per file under ``out``.
+                  overrides=(), console=None, workers: int | None = 1, progress: bool = False) -> list[ImportResult]:
+    """Import ``source`` into one run directory per file under ``out``, in ``workers``
+    processes (``None``: the cores available; :mod:`cliapp.workers`), the same stores with any.
 
     Each run directory ``out/<subfolder>/<file stem>/`` (the source's folder tree, mirrored)
-    holds ``run.zarr`` (the run store) and ``run.json`` (provenance, status ``success``).
-    A bad file of a directory is left out and the others are imported: then
-    :class:`ImportIncomplete` names every bad file (after the good ones are in place). Raises
+    holds ``run.zarr`` (the run store) and ``run.json`` (provenance, status ``success``); it
+    appears (a rename) only once complete, so an import interrupted or killed at any point
+    leaves complete runs and hidden staging, which the next import removes. A run directory
+    already holding this file's import with the same options is skipped (a second import
+    finishes an interrupted one). A bad file of a directory is left out and the others are
+    imported: then :class:`ImportIncomplete` names every bad file (after the good ones are in
+    place) — unreadable, two files that would share a run directory, a run directory holding
+    something else, a sensor model other than the rest of the directory's. Raises
     :class:`ImportInputError` (one sentence; nothing written) when nothing can be imported,
-    ``FileExistsError`` when a run directory already exists; any other failure (a full disk)
-    writes nothing at all.
+    ``FileExistsError`` when the run directory of a single file holds something else; any
+    other failure (a full disk) keeps the runs completed before it and removes the rest.
+    ``progress``: one progress line (on a terminal) of files done, total and rate.
     """
+    from tactile_flow.cliapp.workers import each_in_workers, resolve_workers
+    from tactile_flow.runstore.provenance import same_code
     settings = settings or ImportSettings()
     check_settings(settings)
-    out = Path(out)
-    sources = discover(source)
-    targets = [src.target(out) for src in sources]
-    _check_targets(out, targets)                                        # before reading anything long
-    remove_stale_staging({t.parent for t in targets})
-    failures: list[tuple[str, str]] = []
-    prepared = {}
-    for src in sources:                                                 # first pass: read and check all
-        try:
-            prepared[src] = prepare(src, settings)
-        except ImportInputError as exc:
-            if len(sources) == 1:
-                raise
-            failures.append((str(src.path), str(exc)))
-    if not prepared:
-        raise ImportInputError(f"source={source}: no file could be imported: "
-                               + "; ".join(reason for _, reason in failures))
-    good = [src for src in sources if src in prepared]
-    heads = [keep_fingers(prepared[src].scan.head, prepared[src].fingers) for src in good]
-    baseline = choose_baseline(settings, heads, [str(src.path) for src in good])
-    own = {src: relative_baseline(prepared[src]) for src in good}              # relative values: their rest
-    for src in good:
-        b = own[src] or baseline
-        if b is not None:
-            counts = b.counts(prepared[src].fingers, where=str(src.path))      # every finger covered
-            n = prepared[src].sensor.n_taxels
-            if counts.shape[1] != n:
-                raise ImportInputError(f"{src.path}: the {b.method.replace('_', ' ')} baseline has {counts.shape[1]} "
-                                       f"counts per finger; the sensor model {prepared[src].sensor.name} has {n} "
-                                       f"electrodes")
-    _check_targets(out, targets)
-    options = {f.name: getattr(settings, f.name) for f in fields(settings) if f.name != "sensor"}
-    config_yaml = config_yaml if config_yaml is not None else json.dumps(
-        {"source": str(source), "out": str(out), **options,
-         "sensor": settings.sensor.name if settings.sensor is not None else None}, indent=1)
-    missing_dirs = sorted({d for t in targets for d in (t.parent, *t.parent.parents) if not d.exists()},
-                          key=lambda d: -len(d.parts))                  # made by staging; removed on error
-    staged, written, results = [], [], []
     try:
-        for src in good:
-            p, target = prepared[src], src.target(out)
-            staging = staging_dir(target)
-            staged.append(staging)
-            b = own[src] or baseline
-            import_attrs, prov = run_metadata(src, p, b, config_yaml, overrides, len(good))
-            try:
-                summary = write_run(p, staging, prov, import_attrs, b)           # second pass
-            except ImportInputError as exc:         # found while writing (a rate that disagrees, a changed file)
-                if len(sources) == 1:
-                    raise
-                discard([staging])
-                failures.append((str(src.path), str(exc)))
-                continue
-            written.append((staging, target))
-            results.append(ImportResult(str(src.path), import_attrs["sha256"], str(target),
-                                        str(target / "run.zarr"), list(p.fingers), p.decision["dropped"],
-                                        p.scan.frames, summary["rate_hz"], b.method if b else "none",
-                                        reader_warnings(p.reader.meta), src.subfolder,
-                                        f"{p.sensor.name} ({p.sensor_how})", reader_notes(p.reader.meta)))
-        publish(written)
-    except BaseException:
-        discard(staged)
-        for d in missing_dirs:                  # deepest first; only if empty
-            try:
-                d.rmdir()
-            except OSError:
-                pass
-        raise
-    finally:
-        for s in staged:
-            release_staging(s)
+        workers = resolve_workers(workers, "workers")
+    except ValueError as exc:
+        raise ImportInputError(str(exc)) from None
+    out = Path(out)
+    options = {f.name: getattr(settings, f.name) for f in fields(settings) if f.name != "sensor"}
+    options["sensor"] = settings.sensor.name if settings.sensor is not None else None
+    sources = discover(source)
+    single = len(sources) == 1
+    failures: list[tuple[str, str]] = duplicate_targets(sources, out)
+    bad = {f for f, _ in failures}
+    sources = [s for s in sources if str(s.path) not in bad]
+    done, todo = [], []
+    for src in sources:                                                 # before reading anything long
+        target = src.target(out)
+        if not target.exists() and not target.is_symlink():
+            todo.append(src)
+        elif already_imported(target, src, options):
+            done.append(src)
+        elif single:
+            _check_targets(out, [target])
+        else:
+            failures.append((str(src.path), f"{src.path}: its run directory {target} already exists and holds "
+                                            f"another import or something else; choose another out= or remove it"))
+    remove_stale_staging({src.target(out).parent for src in sources})
     if console:
-        for r in results:
-            dropped = f", dropped {', '.join(f'{f} ({why})' for f, why in r.dropped.items())}" if r.dropped else ""
-            console(f"imported {r.source} -> {r.store}: {r.frames} frames at {r.rate_hz:.4g} Hz, "
-                    f"fingers {', '.join(r.fingers)}{dropped}; sensor {r.sensor}; baseline: {r.baseline}"
-                    + "".join(f"; {n}" for n in r.notes) + "".join(f"; WARNING: {w}" for w in r.warnings))
+        for src in done:
+            console(f"already imported {src.path} -> {src.target(out) / 'run.zarr'}: skipped")
+    pooled = _baseline_mode(settings) == "estimate"                     # the done ones' rest counts too
+    scanned = todo + (done if pooled else [])
+    if not scanned:
+        if failures:
+            raise ImportIncomplete([], failures)
+        return []
+    from tactile_flow.cliapp.progress import progress_bar
+    bar = progress_bar(total=len(scanned), unit="file", desc="import: reading", disable=not progress,
+                       dynamic_ncols=True)
+    say = (lambda line: bar.write(line)) if not bar.disable else console
+    with same_code(), bar:
+        prepared = {}
+        for i, got in each_in_workers(_prepare_one, [(src, settings) for src in scanned], workers):
+            src = scanned[i]
+            bar.update(1)
+            if isinstance(got, ImportInputError):
+                if single:
+                    raise got
+                failures.append((str(src.path), str(got)))
+            elif isinstance(got, BaseException):
+                raise got
+            else:
+                prepared[src] = got
+        failures += mixed_sensors(prepared, settings.sensor)
+        prepared = {src: p for src, p in prepared.items() if str(src.path) not in {f for f, _ in failures}}
+        if not any(src in prepared for src in todo):
+            if failures and not done:
+                raise ImportInputError(f"source={source}: no file could be imported: "
+                                       + "; ".join(reason for _, reason in failures))
+            if failures:
+                raise ImportIncomplete([], failures)
+            return []
+        good = [src for src in scanned if src in prepared]
+        heads = [keep_fingers(prepared[src].scan.head, prepared[src].fingers) for src in good]
+        baseline = choose_baseline(settings, heads, [str(src.path) for src in good])
+        own = {src: relative_baseline(prepared[src]) for src in good}          # relative values: their rest
+        for src in good:
+            b = own[src] or baseline
+            if b is not None:
+                counts = b.counts(prepared[src].fingers, where=str(src.path))  # every finger covered
+                n = prepared[src].sensor.n_taxels
+                if counts.shape[1] != n:
+                    raise ImportInputError(f"{src.path}: the {b.method.replace('_', ' ')} baseline has "
+                                           f"{counts.shape[1]} counts per finger; the sensor model "
+                                           f"{prepared[src].sensor.name} has {n} electrodes")
+        writing = [src for src in todo if src in prepared]
+        config_yaml = config_yaml if config_yaml is not None else json.dumps(
+            {"source": str(source), "out": str(out), **options}, indent=1)
+        missing_dirs = sorted({d for src in writing for t in [src.target(out)] for d in (t.parent, *t.parent.parents)
+                               if not d.exists()}, key=lambda d: -len(d.parts))   # made by staging; removed on error
+        jobs, staged, results = [], [], []
+        bar.reset(total=len(writing))
+        bar.set_description("import: writing")
+        try:
+            for src in writing:
+                p, b = prepared[src], own[src] or baseline
+                staging = staging_dir(src.target(out))
+                staged.append(staging)
+                import_attrs, prov = run_metadata(src, p, b, config_yaml, overrides, len(writing))
+                import_attrs["options"] = options
+                jobs.append((p, staging, prov, import_attrs, b))
+            for i, got in each_in_workers(_write_one, jobs, workers):
+                src, (p, staging, _, import_attrs, b) = writing[i], jobs[i]
+                bar.update(1)
+                if isinstance(got, ImportInputError):  # found while writing (a rate that disagrees, a changed file)
+                    if single:
+                        raise got
+                    discard([staging])
+                    failures.append((str(src.path), str(got)))
+                    continue
+                if isinstance(got, BaseException):
+                    raise got
+                target = src.target(out)
+                publish([(staging, target)])                    # complete: it appears as a run
+                r = ImportResult(str(src.path), import_attrs["sha256"], str(target), str(target / "run.zarr"),
+                                 list(p.fingers), p.decision["dropped"], p.scan.frames, got["rate_hz"],
+                                 b.method if b else "none", reader_warnings(p.reader.meta), src.subfolder,
+                                 f"{p.sensor.name} ({p.sensor_how})", reader_notes(p.reader.meta))
+                results.append((i, r))
+                if say:
+                    say(result_line(r))
+        except BaseException:
+            discard(staged)                                     # the published ones are no longer there
+            for d in missing_dirs:                  # deepest first; only if empty
+                try:
+                    d.rmdir()
+                except OSError:
+                    pass
+            raise
+        finally:
+            for s in staged:
+                release_staging(s)
+    results = [r for _, r in sorted(results, key=lambda x: x[0])]          # the sources' order, as with one worker
     if failures:
         raise ImportIncomplete(results, failures)
     return results
+
+
+def _prepare_one(job) -> PreparedSource:
+    """:func:`prepare` of ``(source, settings)`` (a worker's job)."""
+    return prepare(*job)
+
+
+def _write_one(job) -> dict:
+    """:func:`.writer.write_run` of ``(prepared, staging, provenance, import_attrs, baseline)`` (a
+    worker's job); its summary."""
+    return write_run(*job)
+
+
+def result_line(r: ImportResult) -> str:
+    """The output line of one imported file."""
+    dropped = f", dropped {', '.join(f'{f} ({why})' for f, why in r.dropped.items())}" if r.dropped else ""
+    return (f"imported {r.source} -> {r.store}: {r.frames} frames at {r.rate_hz:.4g} Hz, "
+            f"fingers {', '.join(r.fingers)}{dropped}; sensor {r.sensor}; baseline: {r.baseline}"
+            + "".join(f"; {n}" for n in r.notes) + "".join(f"; WARNING: {w}" for w in r.warnings))
+
+
+def duplicate_targets(sources: list[Source], out: Path) -> list[tuple[str, str]]:
+    """``[(path, reason)]`` for the sources that would share a run directory with another: the
+    same path but for letter case (one directory on a case-insensitive file system, e.g. a
+    laptop's), or one's run directory holding the other's (``take1.csv`` beside a folder
+    ``take1/``)."""
+    by_key: dict[str, list[Source]] = {}
+    for src in sources:
+        by_key.setdefault(str(src.target(out)).casefold(), []).append(src)
+    out_list = []
+    for group in by_key.values():
+        if len(group) > 1:
+            for src in group:
+                others = ", ".join(str(o.path) for o in group if o is not src)
+                out_list.append((str(src.path), f"{src.path}: duplicate name: {others} would have the same run "
+                                                f"directory {src.target(out)} (names differing only in letter case); "
+                                                f"rename one"))
+    dirs = {str(src.target(out)).casefold() for src in sources}
+    for src in sources:
+        parents = [p for p in src.target(out).parents if str(p).casefold() in dirs]
+        if parents:
+            owner = next(o for o in sources if str(o.target(out)).casefold() == str(parents[0]).casefold())
+            out_list.append((str(owner.path), f"{owner.path}: duplicate name: its run directory {parents[0]} "
+                                              f"would hold the runs of the folder of the same name "
+                                              f"({src.path}); rename it"))
+    return list(dict.fromkeys(out_list))
+
+
+def mixed_sensors(prepared: dict, requested) -> list[tuple[str, str]]:
+    """``[(path, reason)]`` for the files of a directory whose sensor model, inferred from their
+    electrode count (none given with ``sensor=``), is not the one most of its files have: a
+    dataset is one sensor model's (its baseline, its analyses compare), a file of another is
+    most likely misplaced. Ties go to the model of the first file."""
+    if requested is not None or len(prepared) < 2:
+        return []
+    counts: dict[str, int] = {}
+    for p in prepared.values():
+        counts[p.sensor.name] = counts.get(p.sensor.name, 0) + 1
+    if len(counts) < 2:
+        return []
+    main = max(counts, key=counts.get)
+    ref = next(p.sensor for p in prepared.values() if p.sensor.name == main)
+    return [(str(src.path), f"{src.path}: mixed sensors: {p.sensor.n_taxels} electrodes ({p.sensor.name}) in a "
+                            f"directory of {ref.name} recordings ({ref.n_taxels} electrodes, {counts[main]} files); "
+                            f"import it on its own, or give sensor= to import only that model's files")
+            for src, p in prepared.items() if p.sensor.name != main]
+
+
+def already_imported(target: Path, src: Source, options: dict) -> bool:
+    """Whether ``target`` is a complete import (``run.json`` status ``success`` and a run
+    store) of the file ``src`` (same SHA-256) with the same ``options``."""
+    try:
+        doc = json.loads((target / "run.json").read_text())
+    except (OSError, ValueError):
+        return False
+    imp = doc.get("import") if isinstance(doc, dict) else None
+    if not isinstance(imp, dict) or doc.get("status") != "success" or not (target / "run.zarr" / "zarr.json").is_file():
+        return False
+    return imp.get("sha256") == checksum(src)["sha256"] and imp.get("options") == json.loads(json.dumps(options))
+
+
+def _baseline_mode(settings: ImportSettings) -> str:
+    mode = settings.baseline
+    return ("file" if settings.calibration else "none") if mode == "auto" else mode
 
 
 def _check_targets(out: Path, targets: list[Path]) -> None:

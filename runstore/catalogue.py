@@ -197,7 +197,8 @@ class Catalogue:
             self.db.execute("COMMIT")
             return out
         except BaseException:
-            self.db.execute("ROLLBACK")
+            if self.db.in_transaction:       # a Ctrl-C landing just after the COMMIT: nothing to undo, and
+                self.db.execute("ROLLBACK")  # ROLLBACK's error would replace (and so lose) the interrupt
             raise
 
     def _upsert(self, run_dir: Path, row: dict, mtime: float) -> None:

@@ -16,6 +16,8 @@ import socket
 import subprocess
 import sys
 import uuid
+from contextlib import contextmanager
+from copy import deepcopy
 from pathlib import Path
 
 from . import files
@@ -32,11 +34,44 @@ def _git(root: Path, *args: str) -> bytes:
     return subprocess.run(["git", "-C", str(root), *args], capture_output=True, check=True, timeout=20).stdout
 
 
+_SAME_CODE: dict | None = None
+"""While :func:`same_code` is entered: what :func:`git_state`, :func:`code_identity` and
+:func:`package_versions` found, by their arguments."""
+
+
+@contextmanager
+def same_code():
+    """Within the block, the code's state (git, the package versions) is asked once and reused:
+    for a process that imports or analyses many runs with the code it loaded at its start (a
+    dataset: ~0.2 s a run otherwise, most of an import of a short record). Nested: the outer
+    block's answers."""
+    global _SAME_CODE
+    outer = _SAME_CODE
+    _SAME_CODE = {} if outer is None else outer
+    try:
+        yield
+    finally:
+        _SAME_CODE = outer
+
+
+def _once(key, compute):
+    """``compute()``, or inside :func:`same_code` the value it gave the first time (a copy)."""
+    if _SAME_CODE is None:
+        return compute()
+    if key not in _SAME_CODE:
+        _SAME_CODE[key] = compute()
+    return deepcopy(_SAME_CODE[key])
+
+
 def git_state(root: Path = PROJECT_ROOT, paths: tuple[str, ...] = ()) -> dict:
     """Commit, dirty flag (tracked files changed), SHA-256 of ``git diff HEAD`` and the number
     of untracked files of the git checkout at ``root`` (the diff and the untracked files under
     ``paths`` only, if given); every value ``"unknown"`` if ``root`` is not the top of a git work
     tree (e.g. an installed wheel) or git is missing."""
+    return _once(("git_state", str(root), tuple(paths)), lambda: _git_state(root, paths))
+
+
+def _git_state(root: Path, paths: tuple[str, ...]) -> dict:
     try:
         top = Path(_git(root, "rev-parse", "--show-toplevel").decode().strip()).resolve()
         if top != root.resolve():
@@ -110,6 +145,11 @@ def code_identity(paths: tuple[str, ...], libraries: tuple[str, ...] = ANALYSIS_
     ``paths`` at HEAD (so a commit elsewhere in the project changes nothing) with the SHA-256
     of their uncommitted diff and their untracked files, and ``libraries``' versions. Outside
     a git checkout, the package version and the libraries."""
+    return _once(("code_identity", tuple(paths), tuple(libraries), str(root)),
+                 lambda: _code_identity(paths, libraries, root))
+
+
+def _code_identity(paths: tuple[str, ...], libraries: tuple[str, ...], root: Path) -> dict:
     from importlib.metadata import PackageNotFoundError, version
 
     def ver(name: str) -> str:
@@ -132,6 +172,10 @@ def code_identity(paths: tuple[str, ...], libraries: tuple[str, ...] = ANALYSIS_
 
 def package_versions() -> dict[str, str]:
     """Version of every installed distribution, by name (sorted)."""
+    return _once("package_versions", _package_versions)
+
+
+def _package_versions() -> dict[str, str]:
     out = {}
     for d in importlib.metadata.distributions():
         name = d.metadata["Name"]

@@ -117,7 +117,7 @@ def test_calibration_without_a_finger(tmp_path):
     assert "no entry for finger mf" in msg
 
 
-def test_failure_while_writing_removes_staging(tmp_path, monkeypatch):
+def test_failure_while_writing_keeps_complete_runs_and_the_next_import_finishes(tmp_path, monkeypatch):
     d = tmp_path / "session"
     d.mkdir()
     electrode_csv(d / "a.csv")
@@ -137,8 +137,14 @@ def test_failure_while_writing_removes_staging(tmp_path, monkeypatch):
     out = tmp_path / "out" / "deeper"
     with pytest.raises(OSError, match="disk full"):
         import_source(d, out, ImportSettings(rate_hz=100))
-    assert_nothing_written(tmp_path / "out")                       # not even the directories it made
     assert len(calls) == 2
+    assert sorted(p.name for p in out.iterdir()) == ["a"]            # complete; b's half store is gone
+    assert (out / "a" / "run.json").is_file()
+    monkeypatch.setattr(writer_mod, "write_import_store", real)
+    lines = []
+    (res,) = import_source(d, out, ImportSettings(rate_hz=100), console=lines.append)   # finishes the job
+    assert res.source.endswith("b.csv") and sorted(p.name for p in out.iterdir()) == ["a", "b"]
+    assert lines[0].startswith(f"already imported {d / 'a.csv'}") and "skipped" in lines[0]
 
 
 def test_existing_run_directory_is_not_overwritten(tmp_path):
@@ -161,7 +167,11 @@ def test_cli_run_exit_codes_and_one_line(tmp_path, capsys):
     cfg.rate_hz = 100
     assert run(cfg, console=lambda *a: None) == 0
     assert (tmp_path / "out" / "ok" / "run.zarr" / "zarr.json").is_file()
-    assert run(cfg) == BAD_INPUT                                    # exists now
+    capsys.readouterr()
+    assert run(cfg) == 0                                            # done already: skipped
+    assert "already imported" in capsys.readouterr().out
+    cfg.rate_hz = 50                                                # another import of it: refused
+    assert run(cfg) == BAD_INPUT
     assert "already exist" in capsys.readouterr().err
     assert FAILED != BAD_INPUT != 0
 

@@ -82,3 +82,24 @@ def test_store_root_attrs_carry_the_same_provenance(prov, tmp_path):
     assert a["run_id"] == prov["run_id"] and a["provenance"] == prov
     doc = json.loads((tmp_path / "run.json").read_text())
     assert doc["git"] == a["provenance"]["git"] and doc["error"] == "boom" and doc["status"] == "failed"
+
+
+def test_same_code_asks_git_and_the_packages_once_and_gives_the_same_answers(monkeypatch):
+    """A dataset's import or analysis collects provenance for every run: within
+    ``same_code()`` git and the installed packages are asked once (the code a process loaded
+    does not change under it), the answers are those asked fresh, and a caller changing its
+    copy changes nobody else's."""
+    from tactile_flow.runstore import provenance as prov
+    fresh = collect("a: 1", [], {}, {}, 0)
+    calls = []
+    real = prov._git
+    monkeypatch.setattr(prov, "_git", lambda *a: calls.append(a) or real(*a))
+    with prov.same_code():
+        first = collect("a: 1", [], {}, {}, 0)
+        n = len(calls)
+        first["packages"]["numpy"] = "changed"
+        second = collect("a: 1", [], {}, {}, 0)
+        assert len(calls) == n                                   # git asked once
+    assert second["git"] == fresh["git"] and second["packages"] == fresh["packages"]
+    collect("a: 1", [], {}, {}, 0)
+    assert len(calls) > n or fresh["git"]["commit"] == "unknown"  # outside the block: asked again
