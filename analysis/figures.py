@@ -27,16 +27,14 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import os
-import signal
 import sys
-import threading
 from collections.abc import Callable
-from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 
+from tactile_flow.cliapp.workers import signals_deferred, worker_init
 from tactile_flow.tactile import flow as tflow
 from tactile_flow.tactile import surface
 
@@ -631,8 +629,8 @@ class FigureWriter:
                 stream.flush()                   # else a worker would flush this process's buffered output too
             self._others = set(multiprocessing.active_children())
             try:
-                with _signals_deferred():
-                    self.pool = ProcessPoolExecutor(workers, multiprocessing.get_context("fork"), _worker_init,
+                with signals_deferred():
+                    self.pool = ProcessPoolExecutor(workers, multiprocessing.get_context("fork"), worker_init,
                                                     (os.getpid(),))
                     self.futures = [self.pool.submit(_draw_job, i, self.out_dir) for i in range(len(self.jobs))]
             except BaseException:                # Ctrl-C as the workers started: there is no __exit__
@@ -684,47 +682,6 @@ class FigureWriter:
             process.kill()
         for process in workers:
             process.join()
-
-
-@contextmanager
-def _signals_deferred():
-    """SIGINT and SIGTERM noted during the block and delivered to their handlers after it (on
-    the main thread; elsewhere nothing changes). Around the workers' start: a worker forked
-    with the app's handlers would raise ``KeyboardInterrupt`` (and print a traceback) for a
-    Ctrl-C at the terminal that lands before :func:`_worker_init` ignores it; with these, it
-    is noted and dropped there, and acted on here once every worker is known."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    noted = []
-    before = {s: signal.signal(s, lambda signum, _: noted.append(signum)) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, handler in before.items():
-            signal.signal(s, handler)
-        for s in dict.fromkeys(noted):
-            signal.raise_signal(s)
-
-
-def _worker_init(parent: int) -> None:
-    """A figure worker: the parent handles Ctrl-C and cancels the pool (SIGINT ignored here);
-    SIGTERM ends it; so does its parent's death (a killed analysis leaves no worker waiting for
-    work forever); the objects it inherited stay out of its cyclic collector's sight."""
-    import gc
-    import os
-    import signal
-    import threading
-    import time
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-
-    def orphaned() -> None:
-        while os.getppid() == parent:
-            time.sleep(0.2)
-        os._exit(1)
-    threading.Thread(target=orphaned, daemon=True).start()
-    gc.freeze()
 
 
 def _draw_job(i: int, out_dir: Path) -> None:

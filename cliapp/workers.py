@@ -111,8 +111,8 @@ def signals_deferred():
     the main thread; elsewhere nothing changes). Around the workers' start: a worker forked
     with the app's handlers would raise ``KeyboardInterrupt`` (and print a traceback) for a
     Ctrl-C that lands before :func:`worker_init` ignores it; with these, it is noted and
-    dropped there, and acted on here once every worker is known. (The same as
-    :mod:`analysis.figures`' pool, which cannot be imported from here.)"""
+    dropped there, and acted on here once every worker is known. (Also around
+    :mod:`analysis.figures`' pool.)"""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

@@ -158,10 +158,10 @@ def test_a_signal_while_the_figure_workers_fork_waits_for_them_and_never_reaches
     """Around the workers' start SIGINT is noted, then raised once they are all known; a
     worker forked meanwhile inherits the noting handler, so a Ctrl-C at the terminal before it
     ignores SIGINT itself is dropped there, not a ``KeyboardInterrupt`` and a traceback."""
-    from tactile_flow.analysis.figures import _signals_deferred
+    from tactile_flow.cliapp.workers import signals_deferred
 
     with pytest.raises(KeyboardInterrupt):
-        with _signals_deferred():
+        with signals_deferred():
             pid = os.fork()
             if pid == 0:                       # the worker, before its own handlers
                 code = 1
