@@ -20,13 +20,12 @@ import dataclasses
 import hashlib
 import os
 import shutil
-import stat
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
-from tactile_flow.runstore import analyses
+from tactile_flow.runstore import analyses, files
 
 KEY_FIELD = "figure_keys"
 """``analysis.json``'s field: figure file name → its key."""
@@ -108,6 +107,7 @@ def earlier_figures(run_dir) -> dict[str, Path]:
     """Figure key → the file of an earlier analysis of the run drawn with that key (a plain
     file in ``analyses/<name>/figures/``; the current analysis's when several have it)."""
     run_dir = Path(run_dir)
+    inside = Path(os.path.realpath(run_dir))
     current = analyses.current_dir(run_dir)
     found: dict[str, Path] = {}
     kept = analyses.listing(run_dir, legacy=False)
@@ -118,16 +118,10 @@ def earlier_figures(run_dir) -> dict[str, Path]:
             continue
         for name, key in keys.items():
             path = Path(a["path"]) / "figures" / str(name)
-            if isinstance(key, str) and Path(name).name == name and _plain_file(path):
+            if (isinstance(key, str) and Path(name).name == name and files.is_plain_file(path)
+                    and inside in Path(os.path.realpath(path)).parents):      # no link out of the run
                 found[key] = path
     return found
-
-
-def _plain_file(path: Path) -> bool:
-    try:
-        return stat.S_ISREG(os.lstat(path).st_mode)
-    except OSError:
-        return False
 
 
 def link(src: Path, dst: Path) -> None:

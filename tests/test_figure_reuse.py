@@ -65,3 +65,16 @@ def test_earlier_figures_by_key_the_current_analysis_first_plain_files_only(tmp_
     assert figure_reuse.earlier_figures(run)["k1"].read_bytes() == b"a1"
     figure_reuse.link(found["k5"], tmp_path / "flow_all.png")
     assert (tmp_path / "flow_all.png").stat().st_ino == found["k5"].stat().st_ino
+
+
+def test_a_figures_folder_linked_out_of_the_run_is_never_read(tmp_path):
+    """A planted ``analyses/<name>/figures`` link to another folder: its files are not the run's."""
+    run, outside = tmp_path / "run", tmp_path / "outside"
+    run.mkdir()
+    outside.mkdir()
+    (outside / "pressure.png").write_bytes(b"not ours")
+    _analysis(run, "a", {"pressure.png": "k1"}, {}, "2026-01-01")
+    figures = run / "analyses" / "a" / "figures"
+    figures.rmdir()
+    os.symlink(outside, figures)
+    assert figure_reuse.earlier_figures(run) == {}
