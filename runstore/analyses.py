@@ -48,7 +48,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from . import files
-from .jsonvalues import jsonable, utc_now
+from .jsonvalues import jsonable, read_object, utc_now
 from .paths import component
 
 ANALYSES = "analyses"
@@ -175,7 +175,7 @@ def listing(run_dir, legacy: bool = True) -> list[dict]:
                 continue
             out.append({**read_meta(d), "name": d.name, "path": str(d)})
     if legacy and not out and _legacy(run_dir) and is_complete(run_dir):
-        s = _read_json(run_dir / SUMMARY)
+        s = read_object(run_dir / SUMMARY)
         out.append({"name": "legacy", "path": str(run_dir), "analysis_id": s.get("analysis_id"),
                     "created": (s.get("provenance") or {}).get("created")})
     out.sort(key=lambda a: (a.get("created") or "", a["name"]))
@@ -194,13 +194,6 @@ def state(run_dir) -> str:
         return "complete"
     return "incomplete" if _legacy(run_dir) else "missing"
 
-
-def _read_json(path: Path) -> dict:
-    try:
-        doc = json.loads(path.read_text())
-        return doc if isinstance(doc, dict) else {}
-    except (OSError, ValueError):
-        return {}
 
 
 # ----------------------------------------------------------------------------- writing
@@ -422,7 +415,7 @@ def adopt_legacy(run_dir) -> str | None:
         return None
     name = None
     if is_complete(run_dir):
-        s = _read_json(run_dir / SUMMARY)
+        s = read_object(run_dir / SUMMARY)
         name = f"legacy-{str(s.get('analysis_id'))[:8]}"
         if find(run_dir, name) is None:
             with staging(run_dir) as staged:

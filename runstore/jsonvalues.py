@@ -4,6 +4,7 @@ is the one time stamp format of the store (ISO 8601 UTC with microseconds and ``
 
 from __future__ import annotations
 
+import json
 import math
 from datetime import datetime, timezone
 from pathlib import Path
@@ -39,3 +40,11 @@ def jsonable(obj, fallback=None):
     raise TypeError(f"not JSON-serialisable: {type(obj).__name__} {obj!r:.80}")
 
 
+def read_object(path) -> dict:
+    """The JSON object in the file ``path``; ``{}`` if it is missing, unreadable, not JSON or
+    not an object (a summary or score a killed process never finished)."""
+    try:
+        doc = json.loads(Path(path).read_text())
+        return doc if isinstance(doc, dict) else {}
+    except (OSError, ValueError):
+        return {}

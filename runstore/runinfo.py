@@ -17,6 +17,7 @@ import re
 from pathlib import Path
 
 from . import analyses
+from .jsonvalues import read_object
 from .layout import SCHEMA_VERSION
 from .reader import StoreVersionError, check_version
 
@@ -134,11 +135,11 @@ def analysis_numbers(directory) -> dict:
     row = {}
     meta = analyses.read_meta(directory)                 # small; summary.json for analyses made before it
     headline = meta["headline"] if isinstance(meta.get("headline"), dict) else \
-        _read(directory / analyses.SUMMARY).get("headline")
+        read_object(directory / analyses.SUMMARY).get("headline")
     for k, v in (headline or {}).items():
         if isinstance(v, (int, float, str, bool)) or v is None:
             row[f"headline.{k}"] = _num(v)
-    for k, v in _score_numbers(_read(directory / "score.json")).items():
+    for k, v in _score_numbers(read_object(directory / "score.json")).items():
         row[f"score.{k}"] = v
     return row
 
@@ -174,13 +175,6 @@ def summary(run_dir, info: dict | None = None) -> dict:
         row[f"config.{k}"] = v
     return row
 
-
-def _read(path: Path) -> dict:
-    try:
-        doc = json.loads(path.read_text())
-        return doc if isinstance(doc, dict) else {}
-    except (OSError, ValueError):
-        return {}
 
 
 def newest_mtime(run_dir) -> float:

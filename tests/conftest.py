@@ -1,4 +1,6 @@
 import signal
+import subprocess
+import sys
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -146,3 +148,15 @@ def wait_for_store(directory: Path, timeout_s: float = 60.0) -> None:
         except FileNotFoundError:
             pass
         time.sleep(0.1)
+
+
+TACTILE_RUN = [sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "progress=false"]
+
+
+def record_run(root: Path) -> Path:
+    """The default protocol recorded on the simulated lab, not analysed, by a real
+    ``tactile-run`` process into ``root/run``; returns that run directory."""
+    proc = subprocess.run([*TACTILE_RUN, "analyze=false", "hydra.run.dir=run"], cwd=root, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    return root / "run"

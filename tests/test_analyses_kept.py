@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import record_run
 from tactile_flow.runstore import analyses
 
 ANALYZE = [sys.executable, "-c", "from tactile_flow.analysis.cli import main; main()"]
@@ -121,11 +122,7 @@ def test_a_pointer_that_leaves_analyses_is_not_followed(tmp_path):
 # ----------------------------------------------------------------------------- real analyses
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    root = tmp_path_factory.mktemp("rec")
-    proc = subprocess.run([*RUN, "analyze=false", "hydra.run.dir=run"], cwd=root, capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    return root / "run"
+    return record_run(tmp_path_factory.mktemp("rec"))
 
 
 @pytest.fixture

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import record_run
 from tactile_flow.analysis.run import analyze_run
 from tactile_flow.protocols.resume import analysis_state
 from tactile_flow.runstore import analyses
@@ -25,11 +26,7 @@ FAST = {"progress": False, "figures": False}
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
-    root = tmp_path_factory.mktemp("rec")
-    proc = subprocess.run([*RUN, "analyze=false", "hydra.run.dir=run"], cwd=root, capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    return root / "run" / "run.zarr"
+    return record_run(tmp_path_factory.mktemp("rec")) / "run.zarr"
 
 
 @pytest.fixture
@@ -201,8 +198,7 @@ def test_an_analysis_stopped_between_the_steps_of_its_commit_leaves_a_whole_curr
     the new one, and the next analysis finishes the job."""
     first = analyze_run(store, FAST, console=lambda *a: None)
     config = FAST if force else {**FAST, "flow": {"method": "dis"}}
-    real_write, real_rename, real_point, real_journal = (analyses.files.write_text, os.rename, analyses._point,
-                                                         analyses._journal)
+    real_write, real_rename, real_point = analyses.files.write_text, os.rename, analyses._point
 
     def write(directory, name, *a, **k):
         if name == analyses.META:

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import record_run
 from tactile_flow.runstore import files, paths, rundir
 
 RUN = [sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "progress=false"]
@@ -196,11 +197,7 @@ def test_a_protocol_name_that_climbs_out_of_outputs_is_refused_and_makes_nothing
 
 @pytest.fixture(scope="module")
 def finished(tmp_path_factory):
-    root = tmp_path_factory.mktemp("finished")
-    proc = subprocess.run([*RUN, "analyze=false", "hydra.run.dir=run"], cwd=root, capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    return root / "run"
+    return record_run(tmp_path_factory.mktemp("finished"))
 
 
 @pytest.mark.slow
