@@ -267,6 +267,7 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
     ``progress``: one progress line (on a terminal) of files done, total and rate.
     """
     from tactile_flow.cliapp.workers import each_in_workers, resolve_workers
+    from tactile_flow.runstore.catalogue import kept_open
     from tactile_flow.runstore.provenance import same_code
     settings = settings or ImportSettings()
     check_settings(settings)
@@ -308,7 +309,7 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
     bar = progress_bar(total=len(scanned), unit="file", desc="import: reading", disable=not progress,
                        dynamic_ncols=True)
     say = (lambda line: bar.write(line)) if not bar.disable else console
-    with same_code(), bar:
+    with same_code(), kept_open(), bar:
         prepared = {}
         for i, got in each_in_workers(_prepare_one, [(src, settings) for src in scanned], workers):
             src = scanned[i]
