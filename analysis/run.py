@@ -2,7 +2,7 @@
 
 ``analyze_run(store_path, analysis_cfg) -> dict`` (the summary) is what ``tactile-run`` calls
 when a run ends and what ``tactile-analyze`` calls per run. Each analysis goes into its own
-directory, ``RUN/analyses/<name>/`` (``analysis.json``, ``analysis.zarr``, ``summary.json``,
+directory, ``RUN/analyses/<name>/`` (``analysis.json``, ``analysis.zarr.zip``, ``summary.json``,
 ``score.json`` on simulated runs, i.e. stores with a ``truth`` group, ``figures/*.png``), and
 becomes the run's current one, ``RUN/analysis`` (:mod:`runstore.analyses`: made in a staging
 directory, renamed in whole, made current by one rename; every earlier analysis is kept).
@@ -203,7 +203,7 @@ def _analyse(store_path: Path, run, model, cfg, console, signals_before: int, na
                 tree = results.to_tree(a, list(model.plans), {"analysis_id": analysis_id,
                                                               "provenance": json.loads(results.dumps(provenance))},
                                        fields=cfg.save_fields)
-                labelled.write_tree(tree, staging / "analysis.zarr")
+                labelled.write_tree(tree, staging / analyses.PACKED_STORE)     # one zip file
                 if score is not None:
                     (staging / "score.json").write_text(results.dumps(score))
                 if drawing is not None:

@@ -62,6 +62,17 @@ def find(directory, name: str = "run.zarr") -> Path | None:
     return None
 
 
+def read_member(store, key: str) -> bytes:
+    """The bytes of ``key`` (``"zarr.json"``, ``"biotac/zarr.json"``) in the store at ``path``,
+    of either layout, without zarr; ``OSError`` (``FileNotFoundError``, ``zipfile.BadZipFile``)
+    or ``KeyError`` if it cannot be read."""
+    store = Path(store)
+    if is_packed(store):
+        with zipfile.ZipFile(store) as z:
+            return z.read(key)
+    return (store / key).read_bytes()
+
+
 def run_store(run_dir, info: dict | None = None) -> Path:
     """The run store of the run directory ``run_dir``: the one its ``run.json`` (``info``)
     names as ``store``, else :func:`find` (``run.zarr`` or ``run.zarr.zip``), else the

@@ -184,7 +184,7 @@ def test_a_directory_analysed_over_two_workers_is_the_same_as_one(tmp_path):
         s1, s2 = (json.loads((tmp_path / d / rel / "analysis" / "summary.json").read_text()) for d in ("one", "two"))
         for key in ("headline", "contacts", "segments", "estimates", "whole_run", "skipped", "labels"):
             assert s1[key] == s2[key], key
-        x, y = (arrays(tmp_path / d / rel / "analysis" / "analysis.zarr") for d in ("one", "two"))
+        x, y = (arrays(tmp_path / d / rel / "analysis" / "analysis.zarr.zip") for d in ("one", "two"))
         assert sorted(x) == sorted(y)
         for k in x:
             np.testing.assert_array_equal(x[k], y[k], err_msg=k)

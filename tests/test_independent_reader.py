@@ -23,7 +23,7 @@ import zarr
 from hydra import compose, initialize_config_dir
 
 from conftest import DATA
-from tactile_flow.runstore import open_group, store_url
+from tactile_flow.runstore import open_group, open_run, packed, store_url
 
 ts = pytest.importorskip("tensorstore")
 xr = pytest.importorskip("xarray")
@@ -192,7 +192,7 @@ def test_an_imported_csv_holds_only_its_streams_and_opens_with_xarray(tmp_path):
 
 
 def _analysis_tree(run_dir: Path):
-    return xr.open_datatree(run_dir / "analysis" / "analysis.zarr", engine="zarr")
+    return open_run(packed.find(run_dir / "analysis", "analysis.zarr"))
 
 
 def test_a_store_of_the_earlier_layout_opens_and_analyses_as_the_same_file_imported_today(tmp_path):
@@ -220,7 +220,8 @@ def test_a_store_of_the_earlier_layout_opens_and_analyses_as_the_same_file_impor
     before = analyze_run(old / "run.zarr", cfg, console=lambda *a: None)
     after = analyze_run(new.store, cfg, console=lambda *a: None)
     assert before["segments"] == after["segments"] and len(before["segments"]) >= 1
-    read, text = _check_every_array(new_dir / "analysis" / "analysis.zarr")      # and the analysis' arrays
+    assert _is_zip(new_dir / "analysis" / "analysis.zarr.zip")                     # packed since 0.3
+    read, text = _check_every_array(new_dir / "analysis" / "analysis.zarr.zip")  # and the analysis' arrays
     assert read > 40 and "segments/label" in text
     a, b = _analysis_tree(old), _analysis_tree(new_dir)
     assert [n.path for n in a.subtree] == [n.path for n in b.subtree]

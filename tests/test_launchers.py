@@ -175,7 +175,7 @@ def test_analysis_sweep_on_submitit_local(recorded, tmp_path):
     assert proc.returncode == 0, proc.stderr
     rows = table(tmp_path)
     assert [(r["run"], r["result"]) for r in rows] == [(str(runs / n / "run.zarr"), "analysed") for n in "ab"]
-    assert (runs / "b" / "analysis" / "analysis.zarr").is_dir()
+    assert (runs / "b" / "analysis" / "analysis.zarr.zip").is_file()
 
 
 @pytest.mark.slow
