@@ -5,7 +5,7 @@
 Both stores are zarr v3 groups that xarray opens as one ``DataTree`` each
 (``xr.open_datatree(path, engine="zarr")``; layouts in docs/run_store.md and docs/analysis.md),
 in either layout: a directory (``run.zarr`` of a recording) or packed, one zip file
-(``run.zarr.zip`` of an import, ``analysis.zarr.zip`` of an analysis since 0.3), which xarray
+(``run.zarr.zip`` of an import, ``analysis.zarr.zip`` of an analysis, after 0.2.0), which xarray
 opens by the URL ``zip::PATH`` (fsspec's zip file system; :func:`store_url`).
 This example prints the run's steps (from ``run.zarr`` ``/events``) and its segments with their
 slip estimates (``analysis.zarr`` ``/segments`` and ``/estimates/slip``), and saves one figure:

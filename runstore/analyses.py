@@ -7,14 +7,14 @@ Layout of a run directory (docs/run_store.md)::
       analyses/
         farneback-3f9a2c1b7d/      one directory per analysis: analysis.json, summary.json,
         dis-91c2e0aa45/              analysis.zarr.zip (one file; analysis.zarr, a directory,
-                                     before 0.3), score.json (simulated runs), figures/
+                                     0.2.0 and before), score.json (simulated runs), figures/
         .staging-<id>/             an analysis being made (removed if its process died)
       analysis -> analyses/dis-91c2e0aa45      the current analysis (a relative link)
       summary.json -> analysis/summary.json    the paths of the layout before 0.2, kept: they
       analysis.zarr -> analysis/analysis.zarr  follow the current analysis
       score.json -> analysis/score.json
       figures -> analysis/figures
-      analysis.zarr.zip -> analysis/analysis.zarr.zip   (0.3) the analysis store, packed
+      analysis.zarr.zip -> analysis/analysis.zarr.zip   (after 0.2.0) the analysis store, packed
       analysis_history.jsonl                   one line per analysis made, reused or made current
 
 An analysis is made in ``analyses/.staging-<id>/`` and renamed into ``analyses/<name>/``
@@ -67,7 +67,7 @@ SUMMARY = "summary.json"
 HISTORY = "analysis_history.jsonl"
 #: the outputs of an analysis, and the run-directory paths of the layout before 0.2 that follow the current one
 OUTPUTS = ("analysis.zarr", "summary.json", "score.json", "figures")
-#: the analysis store: packed (0.3 on), or a directory (before)
+#: the analysis store: packed (after 0.2.0), or a directory (0.2.0 and before)
 STORE = "analysis.zarr"
 PACKED_STORE = packed_name(STORE)
 #: the run-directory paths that follow the current analysis: those of the layout before 0.2, and its packed store
@@ -113,7 +113,7 @@ def _pointer(run_dir: Path) -> str | None:
 
 def is_complete(directory) -> bool:
     """Whether ``directory`` holds a whole analysis: its ``summary.json``, and the same
-    ``analysis_id`` in its store (``analysis.zarr.zip``, or ``analysis.zarr`` before 0.3) and
+    ``analysis_id`` in its store (``analysis.zarr.zip``, or ``analysis.zarr`` by 0.2.0 and before) and
     ``score.json`` (when there is one). A directory renamed into ``analyses/`` is whole by
     construction; this also tells a legacy run directory's outputs from an analysis killed
     half-way."""

@@ -5,7 +5,7 @@ versions this reader understands).
 
 These are the project's one way in to a store — a run's ``run.zarr`` or an analysis's
 ``analysis.zarr`` — whatever its layout: a directory store (a recording, or any store
-written before 0.3) or a packed one (``run.zarr.zip``, ``analysis.zarr.zip``: one zip file,
+written by 0.2.0 or before) or a packed one (``run.zarr.zip``, ``analysis.zarr.zip``: one zip file,
 :mod:`.packed`). :func:`zarr_store` is what zarr-python is handed for either;
 :func:`store_url` the string to give xarray or zarr yourself (``zip::/abs/run.zarr.zip`` for a
 packed store, read through fsspec). A packed store is read through zarr's ``ZipStore``
@@ -41,12 +41,49 @@ def check_version(attrs, where="run store") -> str:
 
 def zarr_store(path):
     """What zarr-python (or xarray) is handed to read the store at ``path``, read-only: a
-    ``zarr.storage.ZipStore`` for a packed store (a ``*.zip`` file), the path itself (a
-    string) for a directory store."""
+    ``zarr.storage.ZipStore`` for a packed store (a ``*.zip`` file; one that reopens its file
+    in a forked process, :func:`_fork_safe_zip_store`), the path itself (a string) for a
+    directory store."""
     if packed.is_packed(path):
-        from zarr.storage import ZipStore
-        return ZipStore(Path(path), mode="r")
+        return _fork_safe_zip_store()(Path(path), mode="r")
     return str(path)
+
+
+_ZIP_STORE = None
+
+
+def _fork_safe_zip_store():
+    """zarr's ``ZipStore``, each open one reopened in a process forked from the one that
+    opened it. A forked process shares its parent's open file, *and its offset*: zipfile reads
+    a member by a seek then a read, so a parent and a child (figure workers, dataset workers)
+    reading at once would read at each other's positions; and a lock held by the parent's I/O
+    thread at the fork would never be released in the child. A fresh open and a fresh lock
+    have neither problem."""
+    global _ZIP_STORE
+    if _ZIP_STORE is None:
+        import os
+        import weakref
+
+        from zarr.storage import ZipStore
+
+        opened = weakref.WeakSet()
+
+        class ForkSafeZipStore(ZipStore):
+            __hash__ = object.__hash__                  # ZipStore defines __eq__ only; kept in a WeakSet
+
+            def _sync_open(self) -> None:
+                super()._sync_open()
+                opened.add(self)
+
+        def reopen_in_child() -> None:
+            for store in list(opened):
+                if store._is_open:
+                    store._is_open = False          # the parent's file object stays the parent's
+                    store._sync_open()              # a new file (own offset) and a new lock
+
+        os.register_at_fork(after_in_child=reopen_in_child)
+        _ZIP_STORE = ForkSafeZipStore
+    return _ZIP_STORE
 
 
 def store_url(path) -> str:

@@ -3,7 +3,7 @@ implementation (tensorstore's ``zarr3`` driver, C++) with the values zarr-python
 the text arrays, which the zarr v3 core has no data type for: tensorstore refuses them, and they
 are read here from their files by the published formats of the zarr extensions they use
 (``docs/run_store.md``, "Reading a store without zarr-python"). Stores of both layouts: a
-directory (a recording, any store before 0.3) and packed, one zip file (an import's
+directory (a recording, any store of 0.2.0 or before) and packed, one zip file (an import's
 ``run.zarr.zip``, an analysis's ``analysis.zarr.zip``), which tensorstore reads through its
 ``zip`` kvstore. Also: the stores of an import and of a run open with ``xarray.open_datatree``
 (a packed one by its ``zip::`` URL), and an import holds no empty device groups."""
@@ -220,7 +220,7 @@ def test_a_store_of_the_earlier_layout_opens_and_analyses_as_the_same_file_impor
     before = analyze_run(old / "run.zarr", cfg, console=lambda *a: None)
     after = analyze_run(new.store, cfg, console=lambda *a: None)
     assert before["segments"] == after["segments"] and len(before["segments"]) >= 1
-    assert _is_zip(new_dir / "analysis" / "analysis.zarr.zip")                     # packed since 0.3
+    assert _is_zip(new_dir / "analysis" / "analysis.zarr.zip")                     # packed (after 0.2.0)
     read, text = _check_every_array(new_dir / "analysis" / "analysis.zarr.zip")  # and the analysis' arrays
     assert read > 40 and "segments/label" in text
     a, b = _analysis_tree(old), _analysis_tree(new_dir)
