@@ -63,7 +63,7 @@ def find(directory, name: str = "run.zarr") -> Path | None:
 
 
 def read_member(store, key: str) -> bytes:
-    """The bytes of ``key`` (``"zarr.json"``, ``"biotac/zarr.json"``) in the store at ``path``,
+    """The bytes of ``key`` (``"zarr.json"``, ``"biotac/zarr.json"``) in the store at ``store``,
     of either layout, without zarr; ``OSError`` (``FileNotFoundError``, ``zipfile.BadZipFile``)
     or ``KeyError`` if it cannot be read."""
     store = Path(store)
@@ -116,7 +116,7 @@ def write_zip(members, target) -> Path:
                     if isinstance(content, Path):
                         z.write(content, key, compress_type=kind)
                     else:
-                        info = zipfile.ZipInfo(key, date_time=_NOW())
+                        info = zipfile.ZipInfo(key, date_time=time.localtime()[:6])
                         info.external_attr = 0o644 << 16
                         z.writestr(info, content, compress_type=kind)
             raw.flush()
@@ -132,7 +132,3 @@ def write_zip(members, target) -> Path:
             os.unlink(tmp)
         raise
     return target
-
-
-def _NOW() -> tuple:
-    return time.localtime()[:6]

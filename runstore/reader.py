@@ -95,18 +95,17 @@ def store_url(path) -> str:
     return str(path)
 
 
-def open_run(path, where: str | None = None):
+def open_run(path):
     """The store at ``path`` (a directory store or a packed ``*.zip``) as an
     ``xarray.DataTree``, through the consolidated metadata (the state of its last commit); a
-    store of an unknown major schema version is refused (``where`` names it in the error;
-    default the path)."""
+    store of an unknown major schema version is refused."""
     import xarray as xr
     tree = xr.open_datatree(zarr_store(path), engine="zarr", consolidated=True)
-    check_version(tree.attrs, where or str(Path(path)))
+    check_version(tree.attrs, str(Path(path)))
     return tree
 
 
-def open_group(path, where: str | None = None, consolidated: bool = True):
+def open_group(path, consolidated: bool = True):
     """The store at ``path`` (a directory store or a packed ``*.zip``) as a read-only
     ``zarr.Group``, through the consolidated metadata (the state of its last commit, as
     :func:`open_run`; ``consolidated=False``: every node's own ``zarr.json``, which is what
@@ -114,7 +113,7 @@ def open_group(path, where: str | None = None, consolidated: bool = True):
     refused. ``group["biotac/time"][...]`` reads an array whole."""
     import zarr
     group = zarr.open_group(zarr_store(path), mode="r", use_consolidated=consolidated)
-    check_version(group.attrs, where or str(Path(path)))
+    check_version(group.attrs, str(Path(path)))
     return group
 
 
