@@ -2,6 +2,7 @@
 
     python benchmarks/bench_slip_direction.py [--out DIR] [--grid classic|varied] [--noise 1]
                                               [--real-touch 6] [--quick] [--sensor biotac_sp biotac]
+                                              [--seeds 1]
 
 Runs (or reuses, in ``--out``) the slip-in-place grid — ``classic``: the 72 conditions of
 ``+experiment=slip_in_place_grid`` (6 directions 60° apart, both rotation senses, a touch × light
@@ -11,7 +12,9 @@ away from the contact, pulls and twists of every speed, a hand's wander) — at 
 analyses every run with ``tactile-analyze``'s defaults and scores it against the simulator's
 truth. Then it writes records of real touches (``tests/real_touch.py``: real contact frames held
 under the real resting noise, from the first frame and reached from rest; ``--real-touch`` frames
-per finger and grasp file) and counts how many read as touch.
+per finger and grasp file) and counts how many read as touch. ``--seeds N`` runs every condition
+with the simulator's seeds 0 … N−1 (``hardware.seed``: the sensor's noise and the holder's
+tremor): a grid N times the size, for figures with more than 16 rotations behind them.
 
 Each sensor model of ``--sensor`` (``conf/sensor/``; by default the BioTac SP and the classic
 BioTac, docs/sensors.md) runs the grid with its own fingertips, and its lines and tables are
@@ -25,9 +28,11 @@ real touches), then markdown tables (docs/analysis.md):
 - per evidence source, the shipped decision with that source alone in its place: the
   direction of translations from ``motion`` (the centre of pressure since the first settled
   frames), ``cop_unloaded``, ``static_unloaded`` (negated), ``static_onset``, ``dynamic``; the
-  rotation from ``rotation_dynamic``, ``rotation_static``, ``rotation_turn`` (the pattern's
-  second moments), ``rotation_peak`` (the 90th percentile of the turn over the contact, not its
-  end) or the two flows averaged (shipped) — each class's share read right;
+  rotation, for every contact, from ``rotation_dynamic``, ``rotation_static``, ``rotation_turn``
+  (the pattern's second moments), ``rotation_peak`` (the 90th percentile of the two flows' mean
+  turn over the contact, not its end) or ``rotation_mean`` (the two flows' end values averaged:
+  round 2's decision) — the shipped turn reads the peak where the contact stayed in place and
+  the end values where it moved (``analysis.slip.turn``) — each class's share read right;
 - the slip onset's error against the truth's (ms): within 50 ms, median, 90th and 95th percentiles of
   its magnitude.
 """
@@ -56,20 +61,22 @@ def angle_error(a, b) -> float:
     return abs((a - b + 180.0) % 360.0 - 180.0)
 
 
-def runs(out: Path, grid: str, noise: float, quick: bool, sensor: str = "biotac_sp"):
+def runs(out: Path, grid: str, noise: float, quick: bool, sensor: str = "biotac_sp", seed: int = 0):
     """Yield (condition, store) for every run of the grid at ``noise`` with the fingertips of the
-    sensor model ``sensor``, running the missing ones (the BioTac SP's in ``out/<grid>``, as
-    before; another model's in ``out/<sensor>/<grid>``)."""
+    sensor model ``sensor`` and the simulator's ``seed``, running the missing ones (the BioTac
+    SP's in ``out/<grid>``, as before; another model's in ``out/<sensor>/<grid>``; a seed other
+    than 0 in ``…/<grid>/seed<seed>``)."""
     from tactile_flow.protocols.slip_grid import conditions, run_slip_in_place, varied_conditions
     conds = varied_conditions() if grid == "varied" else conditions()
     if quick:
         conds = conds[::4]
     for c in conds:
-        d = (out if sensor == "biotac_sp" else out / sensor) / grid / f"noise{noise:g}" / c.name
+        d = (out if sensor == "biotac_sp" else out / sensor) / grid / (f"seed{seed}" if seed else "") \
+            / f"noise{noise:g}" / c.name
         if not (d / "run.zarr").exists():
             shutil.rmtree(d, ignore_errors=True)
             try:
-                r = run_slip_in_place(d, c, noise=noise, overrides=[f"sensor={sensor}"])
+                r = run_slip_in_place(d, c, noise=noise, seed=seed, overrides=[f"sensor={sensor}"])
             except Exception as exc:  # noqa: BLE001 - a condition the plan check refuses: said, skipped
                 print(json.dumps({"run": c.name, "status": "refused", "error": str(exc)}), file=sys.stderr)
                 continue
@@ -131,17 +138,20 @@ def source_rotation(est, source):
 
 
 def reread(est, cfg, rotation_source=None, direction_source=None):
-    """The shipped decision with one evidence source in place of the shipped one."""
-    from tactile_flow.analysis.slip import classify
+    """The shipped decision with one evidence source in place of the shipped one (a rotation
+    source in place of both of the shipped turn's readings, the peak and the end values)."""
+    from tactile_flow.analysis.slip import classify, turn
     if est is None or est.get("slip_class") is None:
         return None, None, None
     rot_ev = dict(est["evidence"]["rotation"])
     if rotation_source:
-        rot_ev["rotation_deg"] = source_rotation(est, rotation_source)
+        rot_ev.update(rotation_deg=source_rotation(est, rotation_source), peak_deg=None)
     motion = est["evidence"]["motion"]
     cls, _ = classify(motion["displacement_mm"], rot_ev, motion["radius_mm"], est.get("direction_agreement"), cfg)
     direction = source_direction(est, direction_source) if direction_source else est["slip_direction_sensor_deg"]
-    return cls, direction, rot_ev.get("rotation_deg")
+    if direction is None and cls == "translation":     # a variant reads as a translation what the shipped did not
+        direction = (est["evidence"].get("direction") or {}).get("direction_deg")
+    return cls, direction, turn(motion["displacement_mm"], rot_ev, cfg)[0]
 
 
 def summarise(rows, cfg, bins) -> dict:
@@ -245,6 +255,7 @@ def main(argv=None) -> None:
     ap.add_argument("--noise", type=float, nargs="+", default=[1.0])
     ap.add_argument("--real-touch", type=int, default=6, help="real contact frames per finger and grasp file (0: none)")
     ap.add_argument("--quick", action="store_true", help="every fourth condition")
+    ap.add_argument("--seeds", type=int, default=1, help="run each condition with the simulator's seeds 0 … N−1")
     ap.add_argument("--sensor", nargs="+", default=["biotac_sp", "biotac"],
                     help="sensor models (conf/sensor/): the BioTac SP and the classic BioTac by default")
     args = ap.parse_args(argv)
@@ -263,12 +274,12 @@ def bench(args, sensor: str) -> None:
     bins = DIRECTIONS_DEG if args.grid == "classic" else tuple(range(0, 360, 60))
     t0 = time.perf_counter()
     everything = []
-    for noise in args.noise:
-        for c, store in runs(args.out, args.grid, noise, args.quick, sensor):
+    for noise, seed in [(n, s) for n in args.noise for s in range(args.seeds)]:
+        for c, store in runs(args.out, args.grid, noise, args.quick, sensor, seed):
             tr, est = evaluate(store, model, cfg)
             everything.append((noise, c, tr, est))
             rot = ((est or {}).get("evidence") or {}).get("rotation") or {}
-            print(json.dumps({"sensor": sensor, "run": c.name, "noise": noise, "truth": true_label(c, bins),
+            print(json.dumps({"sensor": sensor, "run": c.name, "noise": noise, "seed": seed, "truth": true_label(c, bins),
                               "read": read_label(*reread(est, cfg.slip), bins),
                               "displacement_mm": (est or {}).get("slip_displacement_mm"),
                               **{k: rot.get(k) for k in ("dynamic_deg", "static_deg", "peak_deg")},
