@@ -360,19 +360,22 @@ def _direction(motion: dict, evidence: dict) -> tuple[float | None, float | None
 
 def turn(displacement, rotation: dict, cfg) -> tuple[float | None, str]:
     """The turn about the pad normal the decision reads (deg, + = counter-clockwise seen from
-    outside the pad) and which reading it is: ``"peak"``, how far the pattern turned
-    (``rotation["peak_deg"]``), for a contact whose centre of pressure stayed within
-    ``cfg.min_displacement_mm`` of its reference window — it was not pulled, so no pull's spurious
-    turn is there to grow with a peak, and a twist's pattern can drift back after the object
-    stops, as its centre of pressure's excursion is read by its 90th percentile, not its end;
-    ``"end"``, the dynamic and the static flows' end values averaged (``rotation["rotation_deg"]``),
-    for a contact that moved: a pull turns the rendered pattern by up to 0.7°/mm on the way
-    (docs/analysis.md), and the two flows' opposite spurious turns halve in their end values.
-    ``"end"`` also where the peak is not known."""
+    outside the pad) and which reading it is.
+
+    ``"end"``: the dynamic and the static flows' end values averaged (``rotation["rotation_deg"]``).
+    A contact that moved (its centre of pressure ``cfg.min_displacement_mm`` or more from its
+    reference window) is always read so: a pull turns the rendered pattern by up to 0.7°/mm on
+    the way (docs/analysis.md), and the two flows' opposite spurious turns halve in their end
+    values. ``"peak"``: how far the pattern turned (``rotation["peak_deg"]``, the 90th percentile
+    of the flows' mean turn over the contact), for a contact that stayed in place where it reads
+    more than the end values: nothing pulled it, so no pull's spurious turn grows on the way, and
+    a light twist's pattern can drift back once the object stops — its turn read by how far it
+    went, as its centre of pressure's excursion is (while a turn reached only in the contact's
+    last frames is read fully by its end values)."""
     end = rotation.get("rotation_deg")
     peak = rotation.get("peak_deg")
     still = displacement is not None and math.isfinite(displacement) and displacement < cfg.min_displacement_mm
-    if still and peak is not None and math.isfinite(peak):
+    if still and peak is not None and math.isfinite(peak) and (end is None or abs(peak) > abs(end)):
         return float(peak), "peak"
     return end, "end"
 

@@ -154,3 +154,13 @@ def test_a_still_touch_with_a_small_turn_stays_a_touch():
     cfg = _slip_cfg()
     assert classify(0.02, {"rotation_deg": 0.82, "peak_deg": 0.86}, 3.0, None, cfg)[0] == "none"
     assert classify(0.02, {"rotation_deg": 0.0, "peak_deg": None}, 3.0, None, cfg)[0] == "none"
+
+
+def test_a_still_contact_turned_late_is_read_by_its_end_values():
+    """A firm twist that reaches its turn only in the contact's last frames: the 90th percentile
+    over the contact (0.75°) under-reads it, the end values (0.92°) do not — the larger is read."""
+    from tactile_flow.analysis.slip import classify, turn
+    cfg = _slip_cfg()
+    rotation = {"rotation_deg": -0.92, "peak_deg": -0.75}
+    assert turn(0.85, rotation, cfg) == (-0.92, "end")
+    assert classify(0.85, rotation, 3.43, None, cfg)[0] == "rotation"
