@@ -31,11 +31,14 @@ Decision (documented in docs/analysis.md, constants in ``analysis.slip``):
 - **slipped or only touched**: the contact slipped when its pattern moved at least
   ``min_displacement_mm`` from the reference window, or turned significantly (below); a touch
   held still — however far from the pad's middle it sits, however its load wanders — does not;
-- **rotation or translation**: a turn is significant when the summed dynamic rotation (of the
-  frames where the pattern moves) is at least ``min_rotation_deg``; the contact *rotated* when
-  that turn, as the arc it sweeps at the contact's radius, is at least ``arc_ratio`` of the
-  displacement (an object turned about an axis away from the contact also drags the contact
-  sideways; a translation's own spurious turn is far smaller than its displacement);
+- **rotation or translation**: a turn is significant when it is at least ``min_rotation_deg``
+  — for a contact that moved, the dynamic and the static flows' end values averaged (a pull's
+  spurious turn, which grows on the way, halves in them); for one whose centre of pressure stayed
+  within ``min_displacement_mm``, how far it turned where that is more (:func:`turn`); the
+  contact *rotated* when that turn, as the arc it sweeps at the contact's radius, is at least
+  ``arc_ratio`` of the displacement (an object turned about an axis away from the contact also
+  drags the contact sideways; a translation's own spurious turn is far smaller than its
+  displacement);
 - ``slip_direction_sensor_deg`` (the direction the object moves relative to the finger): the
   weighted sum of the unit vectors of the centre of pressure's motion from the reference window
   (weight 2), its offset from the taxels' centroid (weight 1: the stretched skin carries the

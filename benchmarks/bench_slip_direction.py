@@ -32,7 +32,9 @@ real touches), then markdown tables (docs/analysis.md):
   (the pattern's second moments), ``rotation_peak`` (the 90th percentile of the two flows' mean
   turn over the contact, not its end) or ``rotation_mean`` (the two flows' end values averaged:
   round 2's decision) — the shipped turn reads the peak where the contact stayed in place and
-  the end values where it moved (``analysis.slip.turn``) — each class's share read right;
+  the end values where it moved (``analysis.slip.turn``) — and ``rotation:beyond_pulls``, the
+  end values less what a pull's spurious turn explains (the pulls' median |turn| per mm of the
+  grid × the displacement) — each class's share read right, with its count;
 - the slip onset's error against the truth's (ms): within 50 ms, median, 90th and 95th percentiles of
   its magnitude.
 """
@@ -137,16 +139,22 @@ def source_rotation(est, source):
     return rot.get(key)
 
 
-def reread(est, cfg, rotation_source=None, direction_source=None):
+def reread(est, cfg, rotation_source=None, direction_source=None, per_mm=None):
     """The shipped decision with one evidence source in place of the shipped one (a rotation
-    source in place of both of the shipped turn's readings, the peak and the end values)."""
+    source in place of both of the shipped turn's readings, the peak and the end values).
+    ``per_mm`` (deg/mm): the turn read is the flows' end values less ``per_mm`` × the
+    displacement (what a pull's spurious turn explains), towards 0."""
     from tactile_flow.analysis.slip import classify, turn
     if est is None or est.get("slip_class") is None:
         return None, None, None
     rot_ev = dict(est["evidence"]["rotation"])
+    motion = est["evidence"]["motion"]
     if rotation_source:
         rot_ev.update(rotation_deg=source_rotation(est, rotation_source), peak_deg=None)
-    motion = est["evidence"]["motion"]
+    if per_mm is not None:
+        end = rot_ev.get("rotation_deg") or 0.0
+        rot_ev.update(rotation_deg=math.copysign(max(0.0, abs(end) - per_mm * motion["displacement_mm"]), end),
+                      peak_deg=None)
     cls, _ = classify(motion["displacement_mm"], rot_ev, motion["radius_mm"], est.get("direction_agreement"), cfg)
     direction = source_direction(est, direction_source) if direction_source else est["slip_direction_sensor_deg"]
     if direction is None and cls == "translation":     # a variant reads as a translation what the shipped did not
@@ -154,12 +162,15 @@ def reread(est, cfg, rotation_source=None, direction_source=None):
     return cls, direction, turn(motion["displacement_mm"], rot_ev, cfg)[0]
 
 
-def summarise(rows, cfg, bins) -> dict:
-    """Rates per true class of the shipped estimate and of each source in its place."""
+def summarise(rows, cfg, bins, per_mm=None) -> dict:
+    """Rates per true class of the shipped estimate and of each source in its place (and, with
+    ``per_mm``, of the turn beyond what the pulls' spurious turn per mm explains: :func:`reread`)."""
     out = {"runs": len(rows)}
     variants = {"shipped": {}}
     variants.update({f"direction:{s}": {"direction_source": s} for s in DIRECTION_SOURCES})
     variants.update({f"rotation:{s}": {"rotation_source": s} for s in ROTATION_SOURCES})
+    if per_mm is not None:
+        variants["rotation:beyond_pulls"] = {"per_mm": per_mm}
     for name, kw in variants.items():
         right = defaultdict(list)
         for c, tr, est in rows:
@@ -174,6 +185,7 @@ def summarise(rows, cfg, bins) -> dict:
                 right["rotation_sense"].append(bool(rotation) and rotation * c.rotation_deg > 0)
                 right["rotation_recognised"].append(cls == "rotation")
         out[name] = {k: float(np.mean(v)) for k, v in right.items()}
+        out[name]["counts"] = {k: [int(np.sum(v)), len(v)] for k, v in right.items()}
     errs = [1e3 * (est["slip_onset_s"] - tr["true_slip_onset_s"]) for c, tr, est in rows
             if c.motion != "none" and est and est.get("slip_onset_s") is not None
             and tr.get("true_slip_onset_s") is not None and math.isfinite(tr["true_slip_onset_s"])]
@@ -184,6 +196,15 @@ def summarise(rows, cfg, bins) -> dict:
                     "abs_q90_ms": float(np.percentile(np.abs(errs), 90)) if errs else None,
                     "abs_q95_ms": float(np.percentile(np.abs(errs), 95)) if errs else None}
     return out
+
+
+def spurious_per_mm(rows) -> float | None:
+    """The pulls' median spurious turn per mm of displacement (|end values' mean| / displacement,
+    deg/mm) over ``rows``: the constant of the compensated variant, taken from the pulls alone."""
+    v = [abs(est["evidence"]["rotation"]["rotation_deg"]) / est["slip_displacement_mm"]
+         for c, _, est in rows if c.motion == "translate" and est and est.get("slip_displacement_mm")
+         and (est["evidence"].get("rotation") or {}).get("rotation_deg") is not None]
+    return float(np.median(v)) if v else None
 
 
 def confusion(rows, cfg, bins) -> tuple[list[str], Counter]:
@@ -288,15 +309,16 @@ def bench(args, sensor: str) -> None:
                               else round(1e3 * (est["slip_onset_s"] - tr["true_slip_onset_s"]), 1)}),
                   flush=True)
     rows = [(c, tr, est) for _, c, tr, est in everything]
+    per_mm = spurious_per_mm(rows)
     cells = defaultdict(list)
     for c, tr, est in rows:
         force = "light" if c.press_force < 3.0 else "firm"
         cells[("tare" if c.tare else "no tare", force)].append((c, tr, est))
     for (tare, force), cell in sorted(cells.items()):
         print(json.dumps({"sensor": sensor, "grid": args.grid, "tare": tare, "force": force,
-                          **summarise(cell, cfg, bins)}))
-    total = summarise(rows, cfg, bins)
-    print(json.dumps({"sensor": sensor, "grid": args.grid, "all": True, **total,
+                          **summarise(cell, cfg, bins, per_mm)}))
+    total = summarise(rows, cfg, bins, per_mm)
+    print(json.dumps({"sensor": sensor, "grid": args.grid, "all": True, "pulls_spurious_deg_per_mm": per_mm, **total,
                       "seconds": round(time.perf_counter() - t0, 1)}))
     touch = real_touch(args.out, args.real_touch) if args.real_touch and sensor == "biotac_sp" else None   # real SPs
     if touch:
@@ -312,8 +334,12 @@ def bench(args, sensor: str) -> None:
     for name, r in total.items():
         if not isinstance(r, dict) or name == "onset":
             continue
-        print(f"| {name} | {fmt(r.get('translate'))} | {fmt(r.get('rotate'))} | {fmt(r.get('none'))} | "
-              f"{fmt(r.get('touch_vs_slip'))} | {fmt(r.get('rotation_sense'))} | {fmt(r.get('rotation_recognised'))} |")
+        cell = lambda k: fmt(r.get(k)) + (" ({}/{})".format(*r["counts"][k]) if k in r["counts"] else "")  # noqa: E731
+        print(f"| {name} | " + " | ".join(cell(k) for k in ("translate", "rotate", "none", "touch_vs_slip",
+                                                             "rotation_sense", "rotation_recognised")) + " |")
+    if per_mm is not None:
+        print(f"\n(rotation:beyond_pulls: the end values less {per_mm:.2f} deg/mm × the displacement, "
+              "the pulls' median spurious turn per mm on this grid)")
     print(spurious_turns(rows, bins))
     o = total["onset"]
     print(f"\nslip onset: {o['dated']} of {o['slips']} slips dated; within 50 ms of the truth: {fmt(o['within_50ms'])}; "
