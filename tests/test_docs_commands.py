@@ -134,6 +134,7 @@ TESTED: dict[str, object] = {
     'python benchmarks/bench_slip_direction.py': BENCH,
     'python benchmarks/bench_slip_direction.py --grid classic': BENCH,
     'python benchmarks/bench_slip_direction.py --grid varied': BENCH,
+    'python benchmarks/bench_slip_direction.py --sensor biotac_sp --seeds 3 --real-touch 0': BENCH,
     'python benchmarks/bench_speed.py': BENCH,
     'python benchmarks/bench_speed.py --only analysis': BENCH,
     'python benchmarks/bench_speed.py --only analysis --repeat 3': BENCH,

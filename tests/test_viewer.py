@@ -327,16 +327,19 @@ def test_the_live_viewer_drops_and_counts_when_it_cannot_keep_up_and_never_block
     for i in range(3):
         flow.push(i, 0.01 * i, rng.integers(2500, 3000, (2, 24)))
     viewer = LiveViewer(fingers, ("bottom",), model, tmp_path, spawn=False)
-    n, worst = 4 * QUEUE_ITEMS, 0.0
+    n, waits = 4 * QUEUE_ITEMS, []
     for i in range(n):
         rows = _rows(i, fingers)
         t0 = time.perf_counter()
         viewer.offer(rows, flow)
-        worst = max(worst, time.perf_counter() - t0)
+        waits.append(time.perf_counter() - t0)
     counts = viewer.close()
     assert counts["rows_offered"] == n and counts["rows_dropped"] > 0
     assert counts["rows_shown"] + counts["rows_dropped"] == n and counts["error"] is None
-    assert worst < 0.05                                                        # never waits for the viewer
+    # Never waits for the viewer: an offer that waited would take the viewer's drawing time,
+    # offer after offer. A loaded machine may stall any one call, so the bound is on the 95th
+    # percentile (a few ms) and on the worst (well under one blocked drain).
+    assert np.percentile(waits, 95) < 0.01 and max(waits) < 0.5, (np.percentile(waits, 95), max(waits))
     rec = Recording(tmp_path / "live.rrd")
     assert rec.chunk_rows("/live/magnitude") == counts["rows_shown"]
 
