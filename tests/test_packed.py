@@ -99,3 +99,22 @@ def test_a_packed_store_opened_before_a_fork_reads_right_in_parent_and_children_
     for c in children:
         c.join(timeout=60)
     assert results == [True, True, True]
+
+
+@pytest.mark.parametrize("damage", ["truncated", "not a zip", "no root metadata"])
+def test_a_damaged_packed_store_is_named_in_one_line_by_the_analysis(tmp_path, damage):
+    from tactile_flow.analysis.load import AnalysisInputError, load_run
+    _directory_store(tmp_path / "run.zarr", rows=10)
+    good = packed.pack(tmp_path / "run.zarr", tmp_path / "good.zarr.zip").read_bytes()
+    bad = tmp_path / "run.zarr.zip"
+    if damage == "truncated":
+        bad.write_bytes(good[:len(good) // 2])
+    elif damage == "not a zip":
+        bad.write_bytes(b"not a zip file at all")
+    else:
+        packed.write_zip([("biotac/zarr.json", b"{}")], bad)
+    with pytest.raises(AnalysisInputError) as err:
+        load_run(bad)
+    message = str(err.value)
+    assert message.startswith(f"{bad}: ") and "\n" not in message
+    assert "cannot be read as a run store" in message
