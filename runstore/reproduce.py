@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 
-from . import analyses, checksum, provenance, runinfo
+from . import analyses, checksum, packed, provenance, runinfo
 from .runinfo import RunRecordError
 
 #: how far a real-lab reproduction may differ from the run and still count as reproduced
@@ -125,8 +125,8 @@ def check_record(run_dir: Path, info: dict, verify_store: bool = True) -> None:
         if not path.is_file() or _sha256(path) != code.get("diff_sha256"):
             raise ReproduceRefused(f"{path}: {'missing' if not path.is_file() else 'altered'}; the run's code was "
                                    f"its commit plus this diff")
-    store = run_dir / str(info.get("store") or "run.zarr")
-    if not (store / "zarr.json").is_file():
+    store = packed.run_store(run_dir, info)
+    if not packed.is_store(store):
         raise ReproduceRefused(f"{store}: missing; expected the run's store")
     recorded = info.get("store_checksum")
     if verify_store and recorded:
@@ -228,8 +228,8 @@ def compare(original: Path, new: Path, info: dict | None = None) -> Comparison:
     a = info or runinfo.load(original)
     b = runinfo.load(new)
     c = Comparison(real_lab=(a.get("config") or {}).get("hardware", {}).get("backend", "sim") != "sim")
-    sa = a.get("store_checksum") or checksum.store_checksum(original / str(a.get("store") or "run.zarr"))
-    sb = b.get("store_checksum") or checksum.store_checksum(new / str(b.get("store") or "run.zarr"))
+    sa = a.get("store_checksum") or checksum.store_checksum(packed.run_store(original, a))
+    sb = b.get("store_checksum") or checksum.store_checksum(packed.run_store(new, b))
     c.n_arrays = len(sa.get("arrays") or {})
     c.arrays = checksum.differing(sa, sb)
     if a.get("status") != b.get("status"):
