@@ -5,7 +5,8 @@
     tactile-analyze -m run=outputs/2026-01-01                          # one job per run.zarr below
     tactile-analyze -m 'run=outputs/**/run.zarr' batch=8 hydra/launcher=joblib   # 8 runs per job
 
-``run=`` names run stores: a ``run.zarr``, a directory (every ``run.zarr`` below it), a
+``run=`` names run stores: a ``run.zarr`` (or a packed ``run.zarr.zip``, as ``tactile-import``
+writes), a directory (every run store below it), a
 shell-style pattern (``*``, ``?``, ``**`` for any depth; :func:`find_stores`), or a list of
 these (``run=[A,B]``). Without ``-m`` they are analysed in ``workers`` processes forked
 from this one (default: the cores available; the start-up paid once per process), with one
@@ -41,7 +42,7 @@ from tactile_flow.cliapp.sensors import composed_sensor
 from tactile_flow.cliapp.workers import resolve_workers
 from tactile_flow.validation import ConfigError
 from tactile_flow.conf import DIR as CONF_DIR
-from tactile_flow.runstore import files
+from tactile_flow.runstore import files, packed
 from tactile_flow.runstore.analyses import AnalysisNameTaken
 from tactile_flow.runstore.paths import PathOutsideRoot
 from tactile_flow.runstore.rundir import RunDirBusy
@@ -50,18 +51,21 @@ from .load import AnalysisInputError
 
 BAD_INPUT, FAILED, INTERRUPTED = 2, 1, 3
 MULTIRUN_FLAGS = ("-m", "--multirun")
+PACKED_RUN = packed.packed_name("run.zarr")
 
 
 def find_stores(spec: str) -> list[Path]:
-    """The run stores ``spec`` names: itself if it is a run store; every ``run.zarr`` below it
+    """The run stores ``spec`` names: itself if it is a run store; every run store (``run.zarr``,
+    or ``run.zarr.zip`` packed) below it
     if it is a directory (sorted); for a shell-style pattern that is not an existing path
     (``*``, ``?``, ``[...]``; ``**`` any depth), the stores of every directory it matches
     (sorted, each once); else ``[spec]`` (its analysis says what is wrong with it)."""
     path = Path(spec)
     if not path.exists() and glob.has_magic(spec):
-        matched = (find_stores(m) for m in sorted(glob.glob(spec, recursive=True)) if Path(m).is_dir())
+        matched = (find_stores(m) for m in sorted(glob.glob(spec, recursive=True))
+                   if Path(m).is_dir() or packed.is_packed(m))
         return list(dict.fromkeys(s for stores in matched for s in stores))
-    if (path / "zarr.json").is_file() or path.suffix == ".zarr":
+    if packed.is_store(path) or path.name.endswith((".zarr", ".zarr" + packed.SUFFIX)):
         return [path]
     if path.is_dir():
         return _stores_below(path)
@@ -69,11 +73,13 @@ def find_stores(spec: str) -> list[Path]:
 
 
 def _stores_below(root: Path) -> list[Path]:
-    """Every ``run.zarr`` directory below ``root``, sorted; the walk skips the inside of
-    ``*.zarr`` stores (hundreds of chunk directories each, and never a run)."""
+    """Every run store below ``root`` (a ``run.zarr`` directory, or a packed ``run.zarr.zip``),
+    sorted; the walk skips the inside of ``*.zarr`` stores (hundreds of chunk directories
+    each, and never a run)."""
     found = []
-    for here, dirs, _ in os.walk(root):
-        found += [Path(here) / "run.zarr"] if "run.zarr" in dirs else []
+    for here, dirs, names in os.walk(root):
+        if "run.zarr" in dirs or PACKED_RUN in names:
+            found.append(packed.find(here))
         dirs[:] = [d for d in dirs if not d.endswith(".zarr")]
     return sorted(found)
 

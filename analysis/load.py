@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile_flow.runstore import packed
 from tactile_flow.runstore.reader import data_arrays, open_group
 from tactile_flow.runstore.sensors import recorded_sensor, require_same_sensor
 
@@ -133,7 +134,8 @@ class RunData:
 
 
 def is_run_store(path: Path) -> bool:
-    return path.is_dir() and (path / "zarr.json").is_file()
+    """A directory store with its root ``zarr.json``, or a packed store (``run.zarr.zip``)."""
+    return packed.is_store(path)
 
 
 MAX_BACKWARD_FRACTION = 0.01
@@ -238,7 +240,7 @@ def load_run(path, in_memory_frames: int = IN_MEMORY_FRAMES, sensor=None) -> Run
         raise AnalysisInputError(f"{path}: no such file or directory")
     if not is_run_store(path):
         raise AnalysisInputError(f"{path}: not a run store (expected a zarr v3 directory with zarr.json, "
-                                 f"as written by tactile-run)")
+                                 f"as tactile-run writes, or a packed run.zarr.zip, as tactile-import writes)")
     try:
         dt = open_group(path)
     except Exception as exc:  # noqa: BLE001 - any reader error means: not readable as a run store

@@ -2,7 +2,7 @@
 
 ``analyze_run(store_path, analysis_cfg) -> dict`` (the summary) is what ``tactile-run`` calls
 when a run ends and what ``tactile-analyze`` calls per run. Each analysis goes into its own
-directory, ``RUN/analyses/<name>/`` (``analysis.json``, ``analysis.zarr``, ``summary.json``,
+directory, ``RUN/analyses/<name>/`` (``analysis.json``, ``analysis.zarr.zip``, ``summary.json``,
 ``score.json`` on simulated runs, i.e. stores with a ``truth`` group, ``figures/*.png``), and
 becomes the run's current one, ``RUN/analysis`` (:mod:`runstore.analyses`: made in a staging
 directory, renamed in whole, made current by one rename; every earlier analysis is kept).
@@ -27,7 +27,7 @@ from pathlib import Path
 
 from tactile_flow.cliapp.heap import long_lived_frozen
 from tactile_flow.cliapp.runner import signals_received
-from tactile_flow.runstore import analyses, files, inflight, labelled, paths, rundir
+from tactile_flow.runstore import analyses, files, inflight, labelled, packed, paths, rundir
 from tactile_flow.runstore.catalogue import register_quietly
 from tactile_flow.runstore.provenance import code_identity, git_state
 from tactile_flow.tactile import warmup
@@ -101,7 +101,7 @@ def _segments_json(a) -> list[dict]:
 
 def analyze_run(store_path, analysis_cfg=None, *, name: str | None = None, force: bool = False,
                 console=print, sensor=None) -> dict:
-    """Analyse ``store_path`` (a ``run.zarr``) with the ``analysis`` config node into the run's
+    """Analyse ``store_path`` (a ``run.zarr``, or a packed ``run.zarr.zip``) with the ``analysis`` config node into the run's
     analysis ``name`` (default: :func:`default_name`) and make it current; return its summary.
     An analysis with the same code, config and store already kept is reused (made current,
     nothing computed) unless ``force``. The sensor model is the one the store was recorded
@@ -119,7 +119,7 @@ def analyze_run(store_path, analysis_cfg=None, *, name: str | None = None, force
     if not cfg.enabled:
         console(f"analysis: disabled (analysis.enabled=false); {store_path} not analysed")
         return {"headline": {"status": "disabled"}}
-    if not (store_path / "zarr.json").is_file():
+    if not packed.is_store(store_path):
         return _analyse_and_write(store_path, cfg, console, name, force, sensor)    # load_run says what is wrong
     run_dir = store_path.parent
     with rundir.locked(run_dir, shared=True):
@@ -210,7 +210,7 @@ def _analyse(store_path: Path, run, model, cfg, console, signals_before: int, na
                 tree = results.to_tree(a, list(model.plans), {"analysis_id": analysis_id,
                                                               "provenance": json.loads(results.dumps(provenance))},
                                        fields=cfg.save_fields)
-                labelled.write_tree(tree, staging / "analysis.zarr")
+                labelled.write_tree(tree, staging / analyses.PACKED_STORE)     # one zip file
                 if score is not None:
                     (staging / "score.json").write_text(results.dumps(score))
                 if drawing is not None:

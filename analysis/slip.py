@@ -31,11 +31,14 @@ Decision (documented in docs/analysis.md, constants in ``analysis.slip``):
 - **slipped or only touched**: the contact slipped when its pattern moved at least
   ``min_displacement_mm`` from the reference window, or turned significantly (below); a touch
   held still — however far from the pad's middle it sits, however its load wanders — does not;
-- **rotation or translation**: a turn is significant when the summed dynamic rotation (of the
-  frames where the pattern moves) is at least ``min_rotation_deg``; the contact *rotated* when
-  that turn, as the arc it sweeps at the contact's radius, is at least ``arc_ratio`` of the
-  displacement (an object turned about an axis away from the contact also drags the contact
-  sideways; a translation's own spurious turn is far smaller than its displacement);
+- **rotation or translation**: a turn is significant when it is at least ``min_rotation_deg``
+  — for a contact that moved, the dynamic and the static flows' end values averaged (a pull's
+  spurious turn, which grows on the way, halves in them); for one whose centre of pressure stayed
+  within ``min_displacement_mm``, how far it turned where that is more (:func:`turn`); the
+  contact *rotated* when that turn, as the arc it sweeps at the contact's radius, is at least
+  ``arc_ratio`` of the displacement (an object turned about an axis away from the contact also
+  drags the contact sideways; a translation's own spurious turn is far smaller than its
+  displacement);
 - ``slip_direction_sensor_deg`` (the direction the object moves relative to the finger): the
   weighted sum of the unit vectors of the centre of pressure's motion from the reference window
   (weight 2), its offset from the taxels' centroid (weight 1: the stretched skin carries the
@@ -227,9 +230,11 @@ def estimate(cf, activation, start: int, stop: int, model, cfg, time=None, valid
     evidence["motion"], evidence["rotation"] = motion, rotation
     direction, agreement = _direction(motion, evidence)
     slip_class, confidence = classify(motion["displacement_mm"], rotation, pm.radius_mm, agreement, cfg)
+    rotation["turn_deg"], rotation["read_as"] = turn(motion["displacement_mm"], rotation, cfg)
     translated = slip_class == "translation"
     out.update(slip_direction_sensor_deg=direction if translated else None,
-               slip_displacement_mm=motion["displacement_mm"], rotation_deg=rotation["rotation_deg"], slip_class=slip_class, confidence=confidence,
+               slip_displacement_mm=motion["displacement_mm"], rotation_deg=rotation["turn_deg"],
+               slip_class=slip_class, confidence=confidence,
                direction_agreement=agreement if translated else None)
     evidence["direction"] = {"direction_deg": direction, "agreement": agreement}
     when = _onset(pm, end, turned, slip_class)
@@ -326,9 +331,8 @@ def _peak_turn(per_frame, series, q: float = 90.0) -> float | None:
     """How far the pattern turned (deg, signed), not where it ended: the ``q``-th percentile of
     |the mean of the summed dynamic rotation and the static rotation since the reference|, frame
     by frame, with the sense of its largest excursion (the turn's analogue of
-    ``slip_displacement_mm``; recorded as evidence, not used by the decision: on the simulated
-    grids it recognises every rotation of the SP's classic grid but reads more pulls as twists,
-    docs/analysis.md)."""
+    ``slip_displacement_mm``). The decision reads it for a contact that stayed in place
+    (:func:`turn`); for one that moved it would read more pulls as twists (docs/analysis.md)."""
     if per_frame is None or series is None:
         return None
     summed = np.r_[0.0, np.cumsum(per_frame)]
@@ -357,14 +361,36 @@ def _direction(motion: dict, evidence: dict) -> tuple[float | None, float | None
     return (float(np.degrees(np.arctan2(total[1], total[0]))) if np.any(total) else None), agreement
 
 
+def turn(displacement, rotation: dict, cfg) -> tuple[float | None, str]:
+    """The turn about the pad normal the decision reads (deg, + = counter-clockwise seen from
+    outside the pad) and which reading it is.
+
+    ``"end"``: the dynamic and the static flows' end values averaged (``rotation["rotation_deg"]``).
+    A contact that moved (its centre of pressure ``cfg.min_displacement_mm`` or more from its
+    reference window) is always read so: a pull turns the rendered pattern by up to 0.7°/mm on
+    the way (docs/analysis.md), and the two flows' opposite spurious turns halve in their end
+    values. ``"peak"``: how far the pattern turned (``rotation["peak_deg"]``, the 90th percentile
+    of the flows' mean turn over the contact), for a contact that stayed in place where it reads
+    more than the end values: nothing pulled it, so no pull's spurious turn grows on the way, and
+    a light twist's pattern can drift back once the object stops — its turn read by how far it
+    went, as its centre of pressure's excursion is (while a turn reached only in the contact's
+    last frames is read fully by its end values)."""
+    end = rotation.get("rotation_deg")
+    peak = rotation.get("peak_deg")
+    still = displacement is not None and math.isfinite(displacement) and displacement < cfg.min_displacement_mm
+    if still and peak is not None and math.isfinite(peak) and (end is None or abs(peak) > abs(end)):
+        return float(peak), "peak"
+    return end, "end"
+
+
 def classify(displacement, rotation: dict, radius_mm: float, agreement, cfg) -> tuple[str | None, float | None]:
     """``(slip_class, confidence)`` from the displacement since the reference window (mm), the
-    rotation evidence, the contact's radius (mm) and the direction's agreement (module
-    docstring); ``(None, None)`` without a displacement."""
+    rotation evidence (read by :func:`turn`), the contact's radius (mm) and the direction's
+    agreement (module docstring); ``(None, None)`` without a displacement."""
     if displacement is None or not math.isfinite(displacement):
         return None, None
     d = displacement / max(cfg.min_displacement_mm, 1e-9)
-    rot = rotation.get("rotation_deg")
+    rot, _ = turn(displacement, rotation, cfg)
     turned = 0.0
     if rot is not None and math.isfinite(rot):
         turned = abs(rot) / max(cfg.min_rotation_deg, 1e-9)

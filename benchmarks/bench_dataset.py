@@ -138,7 +138,10 @@ def cpu_children() -> float:
 
 
 def tree_size(path: Path, skip=()) -> tuple[int, int]:
-    """Files and bytes under ``path`` (not following links), leaving out subtrees named in ``skip``."""
+    """Files and bytes under ``path`` (not following links), leaving out subtrees named in ``skip``;
+    a file (a packed store, ``run.zarr.zip``) is one file."""
+    if path.is_file():
+        return 1, path.stat().st_size
     n = b = 0
     for here, dirs, names in os.walk(path):
         dirs[:] = [d for d in dirs if d not in skip]
@@ -150,11 +153,16 @@ def tree_size(path: Path, skip=()) -> tuple[int, int]:
     return n, b
 
 
+def run_stores(root: Path) -> list[Path]:
+    """Every run store below ``root``: ``run.zarr`` directories, packed ``run.zarr.zip`` files."""
+    return sorted([*root.rglob("run.zarr"), *root.rglob("run.zarr.zip")])
+
+
 def files_per_record(imported: Path) -> dict:
     """Median files and bytes per record: run.zarr, the run directory without analyses, the
     current analysis without figures, and its figures."""
     rows = []
-    for store in sorted(imported.rglob("run.zarr")):
+    for store in run_stores(imported):
         run = store.parent
         analysis = (run / "analysis").resolve() if (run / "analysis").exists() else None
         row = {"store": tree_size(store), "run_dir": tree_size(run, skip=("analyses", "analysis"))}
@@ -214,14 +222,14 @@ def same_results(a: Path, b: Path, sample: int = 10) -> dict:
     """Whether two imports + analyses of one dataset agree: ``analysis_summary.csv`` (every
     run's headline: segments, slip class, direction, displacement, confidence...) with the
     paths made alike, and every array of ``sample`` run stores, value for value."""
-    import zarr
+    from tactile_flow.runstore import open_group
     table = [(d / "analysis_summary.csv").read_text().replace(str(d.name), "IMPORTED") for d in (a, b)]
-    stores = sorted(p.relative_to(a) for p in a.rglob("run.zarr"))
+    stores = sorted(p.relative_to(a) for p in run_stores(a))
     step = max(1, len(stores) // sample)
     arrays = 0
     same_arrays = True
     for rel in stores[::step]:
-        ga, gb = zarr.open_group(a / rel, mode="r"), zarr.open_group(b / rel, mode="r")
+        ga, gb = open_group(a / rel), open_group(b / rel)
         for path in _array_paths(ga):
             arrays += 1
             x, y = ga[path][...], gb[path][...]

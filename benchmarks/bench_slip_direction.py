@@ -2,6 +2,7 @@
 
     python benchmarks/bench_slip_direction.py [--out DIR] [--grid classic|varied] [--noise 1]
                                               [--real-touch 6] [--quick] [--sensor biotac_sp biotac]
+                                              [--seeds 1]
 
 Runs (or reuses, in ``--out``) the slip-in-place grid — ``classic``: the 72 conditions of
 ``+experiment=slip_in_place_grid`` (6 directions 60° apart, both rotation senses, a touch × light
@@ -11,7 +12,9 @@ away from the contact, pulls and twists of every speed, a hand's wander) — at 
 analyses every run with ``tactile-analyze``'s defaults and scores it against the simulator's
 truth. Then it writes records of real touches (``tests/real_touch.py``: real contact frames held
 under the real resting noise, from the first frame and reached from rest; ``--real-touch`` frames
-per finger and grasp file) and counts how many read as touch.
+per finger and grasp file) and counts how many read as touch. ``--seeds N`` runs every condition
+with the simulator's seeds 0 … N−1 (``hardware.seed``: the sensor's noise and the holder's
+tremor): a grid N times the size, for figures with more than 16 rotations behind them.
 
 Each sensor model of ``--sensor`` (``conf/sensor/``; by default the BioTac SP and the classic
 BioTac, docs/sensors.md) runs the grid with its own fingertips, and its lines and tables are
@@ -25,9 +28,13 @@ real touches), then markdown tables (docs/analysis.md):
 - per evidence source, the shipped decision with that source alone in its place: the
   direction of translations from ``motion`` (the centre of pressure since the first settled
   frames), ``cop_unloaded``, ``static_unloaded`` (negated), ``static_onset``, ``dynamic``; the
-  rotation from ``rotation_dynamic``, ``rotation_static``, ``rotation_turn`` (the pattern's
-  second moments), ``rotation_peak`` (the 90th percentile of the turn over the contact, not its
-  end) or the two flows averaged (shipped) — each class's share read right;
+  rotation, for every contact, from ``rotation_dynamic``, ``rotation_static``, ``rotation_turn``
+  (the pattern's second moments), ``rotation_peak`` (the 90th percentile of the two flows' mean
+  turn over the contact, not its end) or ``rotation_mean`` (the two flows' end values averaged:
+  round 2's decision) — the shipped turn reads the peak where the contact stayed in place and
+  the end values where it moved (``analysis.slip.turn``) — and ``rotation:beyond_pulls``, the
+  end values less what a pull's spurious turn explains (the pulls' median |turn| per mm of the
+  grid × the displacement) — each class's share read right, with its count;
 - the slip onset's error against the truth's (ms): within 50 ms, median, 90th and 95th percentiles of
   its magnitude.
 """
@@ -56,20 +63,22 @@ def angle_error(a, b) -> float:
     return abs((a - b + 180.0) % 360.0 - 180.0)
 
 
-def runs(out: Path, grid: str, noise: float, quick: bool, sensor: str = "biotac_sp"):
+def runs(out: Path, grid: str, noise: float, quick: bool, sensor: str = "biotac_sp", seed: int = 0):
     """Yield (condition, store) for every run of the grid at ``noise`` with the fingertips of the
-    sensor model ``sensor``, running the missing ones (the BioTac SP's in ``out/<grid>``, as
-    before; another model's in ``out/<sensor>/<grid>``)."""
+    sensor model ``sensor`` and the simulator's ``seed``, running the missing ones (the BioTac
+    SP's in ``out/<grid>``, as before; another model's in ``out/<sensor>/<grid>``; a seed other
+    than 0 in ``…/<grid>/seed<seed>``)."""
     from tactile_flow.protocols.slip_grid import conditions, run_slip_in_place, varied_conditions
     conds = varied_conditions() if grid == "varied" else conditions()
     if quick:
         conds = conds[::4]
     for c in conds:
-        d = (out if sensor == "biotac_sp" else out / sensor) / grid / f"noise{noise:g}" / c.name
+        d = (out if sensor == "biotac_sp" else out / sensor) / grid / (f"seed{seed}" if seed else "") \
+            / f"noise{noise:g}" / c.name
         if not (d / "run.zarr").exists():
             shutil.rmtree(d, ignore_errors=True)
             try:
-                r = run_slip_in_place(d, c, noise=noise, overrides=[f"sensor={sensor}"])
+                r = run_slip_in_place(d, c, noise=noise, seed=seed, overrides=[f"sensor={sensor}"])
             except Exception as exc:  # noqa: BLE001 - a condition the plan check refuses: said, skipped
                 print(json.dumps({"run": c.name, "status": "refused", "error": str(exc)}), file=sys.stderr)
                 continue
@@ -130,26 +139,38 @@ def source_rotation(est, source):
     return rot.get(key)
 
 
-def reread(est, cfg, rotation_source=None, direction_source=None):
-    """The shipped decision with one evidence source in place of the shipped one."""
-    from tactile_flow.analysis.slip import classify
+def reread(est, cfg, rotation_source=None, direction_source=None, per_mm=None):
+    """The shipped decision with one evidence source in place of the shipped one (a rotation
+    source in place of both of the shipped turn's readings, the peak and the end values).
+    ``per_mm`` (deg/mm): the turn read is the flows' end values less ``per_mm`` × the
+    displacement (what a pull's spurious turn explains), towards 0."""
+    from tactile_flow.analysis.slip import classify, turn
     if est is None or est.get("slip_class") is None:
         return None, None, None
     rot_ev = dict(est["evidence"]["rotation"])
-    if rotation_source:
-        rot_ev["rotation_deg"] = source_rotation(est, rotation_source)
     motion = est["evidence"]["motion"]
+    if rotation_source:
+        rot_ev.update(rotation_deg=source_rotation(est, rotation_source), peak_deg=None)
+    if per_mm is not None:
+        end = rot_ev.get("rotation_deg") or 0.0
+        rot_ev.update(rotation_deg=math.copysign(max(0.0, abs(end) - per_mm * motion["displacement_mm"]), end),
+                      peak_deg=None)
     cls, _ = classify(motion["displacement_mm"], rot_ev, motion["radius_mm"], est.get("direction_agreement"), cfg)
     direction = source_direction(est, direction_source) if direction_source else est["slip_direction_sensor_deg"]
-    return cls, direction, rot_ev.get("rotation_deg")
+    if direction is None and cls == "translation":     # a variant reads as a translation what the shipped did not
+        direction = (est["evidence"].get("direction") or {}).get("direction_deg")
+    return cls, direction, turn(motion["displacement_mm"], rot_ev, cfg)[0]
 
 
-def summarise(rows, cfg, bins) -> dict:
-    """Rates per true class of the shipped estimate and of each source in its place."""
+def summarise(rows, cfg, bins, per_mm=None) -> dict:
+    """Rates per true class of the shipped estimate and of each source in its place (and, with
+    ``per_mm``, of the turn beyond what the pulls' spurious turn per mm explains: :func:`reread`)."""
     out = {"runs": len(rows)}
     variants = {"shipped": {}}
     variants.update({f"direction:{s}": {"direction_source": s} for s in DIRECTION_SOURCES})
     variants.update({f"rotation:{s}": {"rotation_source": s} for s in ROTATION_SOURCES})
+    if per_mm is not None:
+        variants["rotation:beyond_pulls"] = {"per_mm": per_mm}
     for name, kw in variants.items():
         right = defaultdict(list)
         for c, tr, est in rows:
@@ -164,6 +185,7 @@ def summarise(rows, cfg, bins) -> dict:
                 right["rotation_sense"].append(bool(rotation) and rotation * c.rotation_deg > 0)
                 right["rotation_recognised"].append(cls == "rotation")
         out[name] = {k: float(np.mean(v)) for k, v in right.items()}
+        out[name]["counts"] = {k: [int(np.sum(v)), len(v)] for k, v in right.items()}
     errs = [1e3 * (est["slip_onset_s"] - tr["true_slip_onset_s"]) for c, tr, est in rows
             if c.motion != "none" and est and est.get("slip_onset_s") is not None
             and tr.get("true_slip_onset_s") is not None and math.isfinite(tr["true_slip_onset_s"])]
@@ -174,6 +196,15 @@ def summarise(rows, cfg, bins) -> dict:
                     "abs_q90_ms": float(np.percentile(np.abs(errs), 90)) if errs else None,
                     "abs_q95_ms": float(np.percentile(np.abs(errs), 95)) if errs else None}
     return out
+
+
+def spurious_per_mm(rows) -> float | None:
+    """The pulls' median spurious turn per mm of displacement (|end values' mean| / displacement,
+    deg/mm) over ``rows``: the constant of the compensated variant, taken from the pulls alone."""
+    v = [abs(est["evidence"]["rotation"]["rotation_deg"]) / est["slip_displacement_mm"]
+         for c, _, est in rows if c.motion == "translate" and est and est.get("slip_displacement_mm")
+         and (est["evidence"].get("rotation") or {}).get("rotation_deg") is not None]
+    return float(np.median(v)) if v else None
 
 
 def confusion(rows, cfg, bins) -> tuple[list[str], Counter]:
@@ -245,6 +276,7 @@ def main(argv=None) -> None:
     ap.add_argument("--noise", type=float, nargs="+", default=[1.0])
     ap.add_argument("--real-touch", type=int, default=6, help="real contact frames per finger and grasp file (0: none)")
     ap.add_argument("--quick", action="store_true", help="every fourth condition")
+    ap.add_argument("--seeds", type=int, default=1, help="run each condition with the simulator's seeds 0 … N−1")
     ap.add_argument("--sensor", nargs="+", default=["biotac_sp", "biotac"],
                     help="sensor models (conf/sensor/): the BioTac SP and the classic BioTac by default")
     args = ap.parse_args(argv)
@@ -263,12 +295,12 @@ def bench(args, sensor: str) -> None:
     bins = DIRECTIONS_DEG if args.grid == "classic" else tuple(range(0, 360, 60))
     t0 = time.perf_counter()
     everything = []
-    for noise in args.noise:
-        for c, store in runs(args.out, args.grid, noise, args.quick, sensor):
+    for noise, seed in [(n, s) for n in args.noise for s in range(args.seeds)]:
+        for c, store in runs(args.out, args.grid, noise, args.quick, sensor, seed):
             tr, est = evaluate(store, model, cfg)
             everything.append((noise, c, tr, est))
             rot = ((est or {}).get("evidence") or {}).get("rotation") or {}
-            print(json.dumps({"sensor": sensor, "run": c.name, "noise": noise, "truth": true_label(c, bins),
+            print(json.dumps({"sensor": sensor, "run": c.name, "noise": noise, "seed": seed, "truth": true_label(c, bins),
                               "read": read_label(*reread(est, cfg.slip), bins),
                               "displacement_mm": (est or {}).get("slip_displacement_mm"),
                               **{k: rot.get(k) for k in ("dynamic_deg", "static_deg", "peak_deg")},
@@ -277,15 +309,16 @@ def bench(args, sensor: str) -> None:
                               else round(1e3 * (est["slip_onset_s"] - tr["true_slip_onset_s"]), 1)}),
                   flush=True)
     rows = [(c, tr, est) for _, c, tr, est in everything]
+    per_mm = spurious_per_mm(rows)
     cells = defaultdict(list)
     for c, tr, est in rows:
         force = "light" if c.press_force < 3.0 else "firm"
         cells[("tare" if c.tare else "no tare", force)].append((c, tr, est))
     for (tare, force), cell in sorted(cells.items()):
         print(json.dumps({"sensor": sensor, "grid": args.grid, "tare": tare, "force": force,
-                          **summarise(cell, cfg, bins)}))
-    total = summarise(rows, cfg, bins)
-    print(json.dumps({"sensor": sensor, "grid": args.grid, "all": True, **total,
+                          **summarise(cell, cfg, bins, per_mm)}))
+    total = summarise(rows, cfg, bins, per_mm)
+    print(json.dumps({"sensor": sensor, "grid": args.grid, "all": True, "pulls_spurious_deg_per_mm": per_mm, **total,
                       "seconds": round(time.perf_counter() - t0, 1)}))
     touch = real_touch(args.out, args.real_touch) if args.real_touch and sensor == "biotac_sp" else None   # real SPs
     if touch:
@@ -301,8 +334,12 @@ def bench(args, sensor: str) -> None:
     for name, r in total.items():
         if not isinstance(r, dict) or name == "onset":
             continue
-        print(f"| {name} | {fmt(r.get('translate'))} | {fmt(r.get('rotate'))} | {fmt(r.get('none'))} | "
-              f"{fmt(r.get('touch_vs_slip'))} | {fmt(r.get('rotation_sense'))} | {fmt(r.get('rotation_recognised'))} |")
+        cell = lambda k: fmt(r.get(k)) + (" ({}/{})".format(*r["counts"][k]) if k in r["counts"] else "")  # noqa: E731
+        print(f"| {name} | " + " | ".join(cell(k) for k in ("translate", "rotate", "none", "touch_vs_slip",
+                                                             "rotation_sense", "rotation_recognised")) + " |")
+    if per_mm is not None:
+        print(f"\n(rotation:beyond_pulls: the end values less {per_mm:.2f} deg/mm × the displacement, "
+              "the pulls' median spurious turn per mm on this grid)")
     print(spurious_turns(rows, bins))
     o = total["onset"]
     print(f"\nslip onset: {o['dated']} of {o['slips']} slips dated; within 50 ms of the truth: {fmt(o['within_50ms'])}; "

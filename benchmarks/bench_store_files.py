@@ -6,8 +6,13 @@ with the real ``tactile-import`` and analyses it with ``tactile-analyze``, then 
 line per part: files, bytes of the files (apparent) and bytes on disk (allocated blocks), and
 the ratio of each to the record's raw counts (frames × channels × 2 bytes):
 
-- ``run_zarr``: the store; ``run_dir``: the run directory without its analyses (store,
-  ``run.json``, lock); ``analysis``: one analysis directory, figures aside; ``figures``.
+- ``run_zarr``: the store (``run.zarr.zip``, one file, since 0.3; ``run.zarr``, a directory,
+  before); ``run_dir``: the run directory without its analyses (store, ``run.json``, lock);
+  ``analysis``: one analysis directory, figures aside; ``figures``.
+
+Then, for the packing of a store (``runstore.packed``), the run store and the analysis store
+re-packed three ways (``"part": "packing"``): every member stored, every member deflated, and
+the layout written (``zarr.json`` deflated, chunks stored), bytes and ratio to the raw counts.
 
     python benchmarks/bench_store_files.py [--frames 275] [--dir DIR]
 """
@@ -69,7 +74,8 @@ def main(argv=None) -> int:
     subprocess.run([str(bin_dir / "tactile-analyze"), f"run={run}", "analysis.progress=false"], check=True, env=env,
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     (analysis,) = [p for p in (run / "analyses").iterdir() if p.is_dir()]
-    parts = {"run_zarr": tree_files(run / "run.zarr"),
+    store = run / "run.zarr.zip" if (run / "run.zarr.zip").is_file() else run / "run.zarr"
+    parts = {"run_zarr": [store] if store.is_file() else tree_files(store),
              "run_dir": tree_files(run, exclude=("analyses",)),
              "analysis": tree_files(analysis, exclude=("figures",)),
              "figures": tree_files(analysis / "figures")}
@@ -77,7 +83,29 @@ def main(argv=None) -> int:
         m = measure(files)
         print(json.dumps({"part": name, **m, "raw_bytes": raw, "bytes_per_raw": round(m["bytes"] / raw, 2),
                           "disk_per_raw": round(m["disk_bytes"] / raw, 2)}), flush=True)
+    for name, packed in (("run_zarr", store), ("analysis", analysis / "analysis.zarr.zip")):
+        if packed.is_file():
+            print(json.dumps({"part": "packing", "store": name, **packings(packed, work / "packing"),
+                              "raw_bytes": raw}), flush=True)
     return 0
+
+
+def packings(store: Path, work: Path) -> dict:
+    """Bytes of the packed ``store`` re-packed with every member stored, every member deflated,
+    and as written (``zarr.json`` deflated, chunks stored), with their ratios to the raw counts."""
+    import zipfile
+    work.mkdir(parents=True, exist_ok=True)
+    with zipfile.ZipFile(store) as z:
+        members = [(i.filename, z.read(i)) for i in z.infolist()]
+    out = {}
+    for name, kind in (("stored", zipfile.ZIP_STORED), ("deflated", zipfile.ZIP_DEFLATED)):
+        path = work / f"{name}.zip"
+        with zipfile.ZipFile(path, "w", kind) as z:
+            for key, data in members:
+                z.writestr(key, data)
+        out[f"{name}_bytes"] = path.stat().st_size
+    out["written_bytes"] = store.stat().st_size
+    return out
 
 
 if __name__ == "__main__":

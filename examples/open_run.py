@@ -3,7 +3,10 @@
     python examples/open_run.py RUN_DIR [--finger ff] [--out PNG]
 
 Both stores are zarr v3 groups that xarray opens as one ``DataTree`` each
-(``xr.open_datatree(path, engine="zarr")``; layouts in docs/run_store.md and docs/analysis.md).
+(``xr.open_datatree(path, engine="zarr")``; layouts in docs/run_store.md and docs/analysis.md),
+in either layout: a directory (``run.zarr`` of a recording) or packed, one zip file
+(``run.zarr.zip`` of an import, ``analysis.zarr.zip`` of an analysis, after 0.2.0), which xarray
+opens by the URL ``zip::PATH`` (fsspec's zip file system; :func:`store_url`).
 This example prints the run's steps (from ``run.zarr`` ``/events``) and its segments with their
 slip estimates (``analysis.zarr`` ``/segments`` and ``/estimates/slip``), and saves one figure:
 a finger's pressure (PDC above its tare, from ``run.zarr`` ``/biotac``) with the segments as
@@ -29,17 +32,27 @@ import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
 
+def store_url(directory: Path, name: str) -> str | None:
+    """What ``xr.open_datatree`` is given for the store ``name`` in ``directory``: the path of
+    the directory store ``name``, or ``zip::PATH`` of the packed ``name.zip``; None if neither."""
+    if (directory / name).is_dir():
+        return str(directory / name)
+    if (directory / f"{name}.zip").is_file():
+        return f"zip::{(directory / f'{name}.zip').resolve()}"
+    return None
+
+
 def analysis_dir(run_dir: Path) -> Path:
     """The run's current analysis: ``RUN/analysis/`` (every analysis is kept in
     ``RUN/analyses/<name>/``; ``tactile-runs show RUN`` lists them), or the run directory
     itself for a run analysed before tactile-flow 0.2."""
-    return run_dir / "analysis" if (run_dir / "analysis" / "analysis.zarr").is_dir() else run_dir
+    return run_dir / "analysis" if store_url(run_dir / "analysis", "analysis.zarr") else run_dir
 
 
 def open_stores(run_dir: Path) -> tuple[xr.DataTree, xr.DataTree]:
     """The run's recording and its current analysis, each as a DataTree (lazy: arrays load on access)."""
-    return (xr.open_datatree(run_dir / "run.zarr", engine="zarr"),
-            xr.open_datatree(analysis_dir(run_dir) / "analysis.zarr", engine="zarr"))
+    return (xr.open_datatree(store_url(run_dir, "run.zarr"), engine="zarr"),
+            xr.open_datatree(store_url(analysis_dir(run_dir), "analysis.zarr"), engine="zarr"))
 
 
 def steps(run: xr.DataTree) -> list[tuple[str, float, float]]:
@@ -113,7 +126,7 @@ def main(argv=None) -> int:
     parser.add_argument("--finger", default=None, help="the finger to plot (default: the protocol's)")
     parser.add_argument("--out", type=Path, default=None, help="PNG to write (default open_run.png here)")
     args = parser.parse_args(argv)
-    if not (args.run_dir / "run.zarr").is_dir() or not (analysis_dir(args.run_dir) / "analysis.zarr").is_dir():
+    if not store_url(args.run_dir, "run.zarr") or not store_url(analysis_dir(args.run_dir), "analysis.zarr"):
         print(f"error: {args.run_dir} holds no run.zarr and analysis (analyse it with "
               f"tactile-analyze run={args.run_dir}/run.zarr)", file=sys.stderr)
         return 2

@@ -2,7 +2,7 @@
 
     from tactile_flow.importers import ImportSettings, import_source
     results = import_source("lab/session.bag", "imported", ImportSettings(baseline="estimate"))
-    results[0].store       # imported/session/run.zarr, ready for tactile-analyze
+    results[0].store       # imported/session/run.zarr.zip, ready for tactile-analyze
 
 Files are streamed: read twice in chunks of :data:`.recording.CHUNK_FRAMES` frames (a
 checking pass, a writing pass), so memory does not grow with their length.

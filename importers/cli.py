@@ -1,6 +1,6 @@
 """``tactile-import``: bring a ROS bag or CSV recording into a run store (Hydra app, ``conf/import.yaml``).
 
-    tactile-import source=lab/rest.bag                       # -> outputs/imported/rest/run.zarr
+    tactile-import source=lab/rest.bag                       # -> outputs/imported/rest/run.zarr.zip
     tactile-import source=csvs/ rate_hz=100 baseline=estimate out=outputs/imported/s3
     tactile-import source=press.csv calibration=cal.json fingers=[mf]
 

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile_flow.runstore import packed
 from tactile_flow.runstore.clockmodel import OnlineClockModel
 from tactile_flow.runstore.provenance import collect
 from tactile_flow.tactile.sensor import SensorModelError, sensor_for_taxels
@@ -36,7 +37,7 @@ from .csv import GAP_FACTOR, RELATIVE_REST_COUNTS, TIME_UNITS, CsvFile
 from .recording import (CHUNK_FRAMES, Connectivity, ImportInputError, PreparedSource, Reader, Recording, Scan,
                         decide_fingers, keep_fingers, parse_rate)
 from .sources import Source, checksum, discover, sha256_file
-from .writer import discard, publish, release_staging, remove_stale_staging, staging_dir, write_run
+from .writer import PACKED, discard, publish, release_staging, remove_stale_staging, staging_dir, write_run
 
 BASELINES = ("auto", "none", "file", "estimate")
 
@@ -254,7 +255,7 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
     processes (``None``: the cores available; :mod:`cliapp.workers`), the same stores with any.
 
     Each run directory ``out/<subfolder>/<file stem>/`` (the source's folder tree, mirrored)
-    holds ``run.zarr`` (the run store) and ``run.json`` (provenance, status ``success``); it
+    holds ``run.zarr.zip`` (the run store, packed: one file) and ``run.json`` (provenance, status ``success``); it
     appears (a rename) only once complete, so an import interrupted or killed at any point
     leaves complete runs and hidden staging, which the next import removes. A run directory
     already holding this file's import with the same options is skipped (a second import
@@ -299,7 +300,7 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
     remove_stale_staging({src.target(out).parent for src in sources})
     if console:
         for src in done:
-            console(f"already imported {src.path} -> {src.target(out) / 'run.zarr'}: skipped")
+            console(f"already imported {src.path} -> {packed.find(src.target(out))}: skipped")
     pooled = _baseline_mode(settings) == "estimate"                     # the done ones' rest counts too
     scanned = todo + (done if pooled else [])
     if not scanned:
@@ -373,7 +374,7 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
                 target = src.target(out)
                 got, sha256 = got
                 publish([(staging, target)])                    # complete: it appears as a run
-                r = ImportResult(str(src.path), sha256, str(target), str(target / "run.zarr"),
+                r = ImportResult(str(src.path), sha256, str(target), str(target / PACKED),
                                  list(p.fingers), p.decision["dropped"], p.scan.frames, got["rate_hz"],
                                  b.method if b else "none", reader_warnings(p.reader.meta), src.subfolder,
                                  f"{p.sensor.name} ({p.sensor_how})", reader_notes(p.reader.meta))
@@ -476,7 +477,7 @@ def already_imported(target: Path, src: Source, options: dict) -> bool:
     except (OSError, ValueError):
         return False
     imp = doc.get("import") if isinstance(doc, dict) else None
-    if not isinstance(imp, dict) or doc.get("status") != "success" or not (target / "run.zarr" / "zarr.json").is_file():
+    if not isinstance(imp, dict) or doc.get("status") != "success" or not packed.is_store(packed.find(target) or target):
         return False
     return imp.get("sha256") == checksum(src)["sha256"] and imp.get("options") == json.loads(json.dumps(options))
 

@@ -1,4 +1,4 @@
-"""Write a file's :class:`~.recording.Recording` chunks as a run store (``run.zarr`` + ``run.json``), atomically.
+"""Write a file's :class:`~.recording.Recording` chunks as a run store (``run.zarr.zip`` + ``run.json``), atomically.
 
 The store has the layout of a recorded run (``docs/run_store.md``), written through
 :class:`runstore.RunStore` with the recorder's column layout, so ``tactile-analyze``
@@ -26,7 +26,10 @@ residual latency of the clock model (over every ⌊N / 100 000⌋-th frame, as t
 does: every frame below 200 000 frames).
 
 Nothing half-written: everything goes to a hidden temporary directory beside the target,
-renamed into place by :func:`publish` once every store of the import is complete.
+renamed into place by :func:`publish` once every store of the import is complete. The store
+is written there as a directory and packed into one zip file (``run.zarr.zip``:
+:mod:`runstore.packed`) before it is published: an import is never appended to, and one file
+per run is what a shared file system wants (``docs/run_store.md``, "Files per run").
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ import zarr
 from tactile_flow.hardware.biotac import COUNTS_MAX, PAC_RATE_HZ, BiotacFrame
 from tactile_flow.hardware.device import batch_times
 from tactile_flow.hardware.streams import as_dtype
-from tactile_flow.runstore import RunStatus, RunStore, inflight, rundir
+from tactile_flow.runstore import RunStatus, RunStore, inflight, packed, rundir
 from tactile_flow.runstore.clockmodel import ClockFit, latency_stats, sequence_gaps
 from tactile_flow.runstore.provenance import write_run_json
 from tactile_flow.runstore.layout import event_columns
@@ -52,6 +55,9 @@ from .baseline import Baseline
 from .recording import ImportInputError, PreparedSource, Recording, diffs, median_of, rate_of
 
 PROTOCOL = "import"
+#: the store as written (a directory, in staging only) and as published (packed: one file)
+STORE = "run.zarr"
+PACKED = packed.packed_name(STORE)
 OPTIONAL = ("pdc", "tdc", "tac")
 #: frames of the residual-latency sample: every max(1, N // LATENCY_SAMPLE)-th frame
 LATENCY_SAMPLE = 100_000
@@ -313,12 +319,16 @@ def remove_stale_staging(folders) -> list[Path]:
 
 def write_run(prepared: PreparedSource, staging: Path, provenance: dict, import_attrs: dict,
               baseline: Baseline | None = None) -> dict:
-    """``staging/run.zarr`` (:func:`write_import_store`) and ``staging/run.json`` (provenance + status
-    ``success``). Returns :func:`write_import_store`'s summary."""
-    summary = write_import_store(prepared, staging / "run.zarr", provenance, import_attrs, baseline)
+    """``staging/run.zarr.zip`` (:func:`write_import_store` into a directory store, then packed
+    into one file: :mod:`runstore.packed`) and ``staging/run.json`` (provenance + status
+    ``success``, ``store`` naming the packed store). Returns :func:`write_import_store`'s summary."""
+    store = staging / STORE
+    summary = write_import_store(prepared, store, provenance, import_attrs, baseline)
+    packed.pack(store, staging / PACKED)
+    shutil.rmtree(store)
     write_run_json(staging / "run.json", provenance, RunStatus.SUCCESS,
-                   extra={"import": import_attrs, "baseline": (baseline.to_attrs(prepared.fingers) if baseline
-                                                               else {"method": "none"})})
+                   extra={"import": import_attrs, "store": PACKED,
+                          "baseline": baseline.to_attrs(prepared.fingers) if baseline else {"method": "none"}})
     return summary
 
 

@@ -9,7 +9,8 @@ module                 holds
 :mod:`.writer`         :class:`RunStore`: create, append, commit (the commit protocol)
 :mod:`.appender`       the growing arrays' chunks and ``zarr.json`` files, written directly
 :mod:`.reader`         :func:`open_run` (xarray), :func:`open_group` (zarr) and the
-                       schema-version check
+                       schema-version check: the one opener of every store, either layout
+:mod:`.packed`         the packed layout of a finished store: one zip (``run.zarr.zip``)
 :mod:`.labelled`       labelled arrays written as xarray writes them, without xarray
                        (``analysis.zarr``)
 :mod:`.recover`        ``tactile-recover``: close a store its writer never closed
@@ -30,10 +31,10 @@ module                 holds
 """
 
 from .jsonvalues import jsonable, utc_now
-from .reader import StoreVersionError, check_version, open_run
+from .reader import StoreVersionError, check_version, open_group, open_run, store_url
 from .status import ExitCode, RunStatus
 from .layout import SCHEMA_VERSION, STATUSES, TIME_COORDS, Block, Var, run_schema
 from .writer import RunStore, remove_debris
 
-__all__ = ["RunStore", "open_run", "check_version", "StoreVersionError", "run_schema", "Block", "Var",
+__all__ = ["RunStore", "open_run", "open_group", "store_url", "check_version", "StoreVersionError", "run_schema", "Block", "Var",
            "SCHEMA_VERSION", "STATUSES", "RunStatus", "ExitCode", "TIME_COORDS", "jsonable", "utc_now", "remove_debris"]

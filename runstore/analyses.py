@@ -6,13 +6,15 @@ Layout of a run directory (docs/run_store.md)::
       run.zarr  run.json  .hydra/  tactile-run.log  ...      the run's record (never rewritten)
       analyses/
         farneback-3f9a2c1b7d/      one directory per analysis: analysis.json, summary.json,
-        dis-91c2e0aa45/              analysis.zarr, score.json (simulated runs), figures/
+        dis-91c2e0aa45/              analysis.zarr.zip (one file; analysis.zarr, a directory,
+                                     0.2.0 and before), score.json (simulated runs), figures/
         .staging-<id>/             an analysis being made (removed if its process died)
       analysis -> analyses/dis-91c2e0aa45      the current analysis (a relative link)
       summary.json -> analysis/summary.json    the paths of the layout before 0.2, kept: they
       analysis.zarr -> analysis/analysis.zarr  follow the current analysis
       score.json -> analysis/score.json
       figures -> analysis/figures
+      analysis.zarr.zip -> analysis/analysis.zarr.zip   (after 0.2.0) the analysis store, packed
       analysis_history.jsonl                   one line per analysis made, reused or made current
 
 An analysis is made in ``analyses/.staging-<id>/`` and renamed into ``analyses/<name>/``
@@ -22,6 +24,12 @@ new one, each complete, never a mix. Replacing an analysis of the same name (``f
 exchanges the two directories in one step (``renameat2(RENAME_EXCHANGE)``) and keeps the
 old one as ``<name>~<its id>``. A file system without links holds the pointer as a small
 file ``analysis`` (``analyses/<name>``), written by a rename too.
+
+An analysis's store is packed, one zip file (``analysis.zarr.zip``: :mod:`.packed`; it is
+written whole and never appended to); ``RUN/analysis.zarr.zip`` follows the current one as
+the other paths do. A link that follows an output the current analysis has not (its
+``score.json`` or its store of the other layout) is not made, or removed: no link into
+``analysis/`` dangles after a change of the current analysis.
 
 Runs analysed before this layout (``summary.json``, ``analysis.zarr``... as files in the run
 directory) read as they are (:func:`current_dir` is the run directory itself); the first new
@@ -49,6 +57,7 @@ from pathlib import Path
 
 from . import files
 from .jsonvalues import jsonable, read_object, utc_now
+from .packed import find as find_store, packed_name, read_member
 from .paths import component
 
 ANALYSES = "analyses"
@@ -58,6 +67,13 @@ SUMMARY = "summary.json"
 HISTORY = "analysis_history.jsonl"
 #: the outputs of an analysis, and the run-directory paths of the layout before 0.2 that follow the current one
 OUTPUTS = ("analysis.zarr", "summary.json", "score.json", "figures")
+#: the analysis store: packed (after 0.2.0), or a directory (0.2.0 and before)
+STORE = "analysis.zarr"
+PACKED_STORE = packed_name(STORE)
+#: the run-directory paths that follow the current analysis: those of the layout before 0.2, and its packed store
+FOLLOW = (*OUTPUTS, PACKED_STORE)
+#: of those, the ones an analysis may lack (no ground truth; the store of the other layout)
+OPTIONAL = ("score.json", STORE, PACKED_STORE)
 STAGING = ".staging-"
 COMMIT_LOCK = ".commit.lock"
 LEGACY_DEBRIS = (".analysis-staging-*", ".analysis-old-*")
@@ -97,13 +113,15 @@ def _pointer(run_dir: Path) -> str | None:
 
 def is_complete(directory) -> bool:
     """Whether ``directory`` holds a whole analysis: its ``summary.json``, and the same
-    ``analysis_id`` in ``analysis.zarr`` and ``score.json`` (when there is one). A directory
-    renamed into ``analyses/`` is whole by construction; this also tells a legacy run
-    directory's outputs from an analysis killed half-way."""
+    ``analysis_id`` in its store (``analysis.zarr.zip``, or ``analysis.zarr`` by 0.2.0 and before) and
+    ``score.json`` (when there is one). A directory renamed into ``analyses/`` is whole by
+    construction; this also tells a legacy run directory's outputs from an analysis killed
+    half-way."""
     directory = Path(directory)
     try:
         ids = {json.loads((directory / SUMMARY).read_text())["analysis_id"]}
-        ids.add(json.loads((directory / "analysis.zarr" / "zarr.json").read_text())["attributes"]["analysis_id"])
+        store = find_store(directory, STORE) or directory / STORE
+        ids.add(json.loads(read_member(store, "zarr.json"))["attributes"]["analysis_id"])
         if (directory / "score.json").exists():
             ids.add(json.loads((directory / "score.json").read_text())["analysis_id"])
     except (OSError, ValueError, KeyError, TypeError):
@@ -316,17 +334,24 @@ def _point(run_dir: Path, name: str) -> None:
 
 
 def _old_paths_follow(run_dir: Path) -> None:
-    """``summary.json``, ``analysis.zarr``, ``score.json``, ``figures`` in the run directory as
-    links into ``analysis/`` (made once; a legacy file there is adopted first)."""
+    """``summary.json``, ``analysis.zarr``, ``score.json``, ``figures``, ``analysis.zarr.zip``
+    in the run directory as links into ``analysis/`` (made once; a legacy file there is
+    adopted first). Those the current analysis may lack (:data:`OPTIONAL`: a run without
+    ground truth has no score; an analysis has its store in one layout) are linked only when
+    it has them, and such a link of ours is removed when it has not (it would dangle)."""
     fd = os.open(run_dir, os.O_RDONLY | os.O_DIRECTORY)
     try:
-        for name in OUTPUTS:
+        for name in FOLLOW:
+            ours = f"{CURRENT}/{name}"
+            has = name not in OPTIONAL or os.path.lexists(run_dir / CURRENT / name)
             if os.path.lexists(run_dir / name):
+                if not has and os.path.islink(run_dir / name) and os.readlink(run_dir / name) == ours:
+                    os.unlink(name, dir_fd=fd)
                 continue
-            if name == "score.json" and not (run_dir / CURRENT / name).exists():
-                continue                                  # a run without ground truth has no score
+            if not has:
+                continue
             try:
-                os.symlink(f"{CURRENT}/{name}", name, dir_fd=fd)
+                os.symlink(ours, name, dir_fd=fd)
             except FileExistsError:
                 pass
     finally:

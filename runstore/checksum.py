@@ -36,12 +36,13 @@ def _digest(arr) -> str:
 
 
 def array_checksums(path) -> dict[str, str]:
-    """``{"group/array": sha256}`` of every array in the zarr store at ``path`` (sorted)."""
-    import zarr
+    """``{"group/array": sha256}`` of every array in the zarr store at ``path`` (a directory
+    store or a packed one; sorted)."""
+    from .reader import open_group
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        root = zarr.open_group(str(path), mode="r", use_consolidated=False)
+        root = open_group(path, consolidated=False)
 
         def visit(group, prefix):
             for name, arr in sorted(group.arrays(), key=lambda kv: kv[0]):

@@ -23,6 +23,7 @@ from pathlib import Path
 import numcodecs
 import numpy as np
 
+from . import packed
 from .appender import all_fill, metadata_bytes
 
 # xarray's fill value for floating-point variables (FillValueCoder: NaN packed as "<d")
@@ -71,9 +72,24 @@ def _variables(ds: Dataset):
 
 
 def write_tree(tree: Tree, path: Path) -> None:
-    """Write ``tree`` as a zarr v3 store at ``path`` (a new directory), its metadata consolidated
-    at the root, as xarray's writer through zarr-python would: the same ``zarr.json`` files,
-    chunk grid, codecs (``bytes`` then ``zstd`` level 0, as :mod:`.appender` writes them) and
+    """Write ``tree`` as a zarr v3 store at ``path``: a new directory, or with a name ending in
+    ``.zip`` one packed file (:mod:`.packed`: the same keys in a zip, written in one go), its
+    metadata consolidated at the root (:func:`store_members`)."""
+    members = store_members(tree)
+    path = Path(path)
+    if path.name.endswith(packed.SUFFIX):
+        packed.write_zip(members.items(), path)
+        return
+    for key, data in members.items():
+        file = path / key
+        file.parent.mkdir(parents=True, exist_ok=True)
+        file.write_bytes(data)
+
+
+def store_members(tree: Tree) -> dict[str, bytes]:
+    """The store of ``tree`` as ``{key: bytes}``, its metadata consolidated at the root, as
+    xarray's writer through zarr-python would write it: the same ``zarr.json`` files, chunk
+    grid, codecs (``bytes`` then ``zstd`` level 0, as :mod:`.appender` writes them) and
     chunks, where a chunk holding only the fill value is not written.
 
     Why not through zarr: its machinery costs ~3.5 ms per array (metadata objects, its event
@@ -99,10 +115,7 @@ def write_tree(tree: Tree, path: Path) -> None:
     order = sorted(consolidated, key=lambda k: (k.count("/"), k))
     files["zarr.json"] = metadata_bytes(_group_meta(tree.get("/", Dataset()).attrs, {
         **_INLINE_EMPTY, "metadata": {k: consolidated[k] for k in order}}))
-    for key, data in files.items():
-        file = path / key
-        file.parent.mkdir(parents=True, exist_ok=True)
-        file.write_bytes(data)
+    return files
 
 
 _INLINE_EMPTY = {"kind": "inline", "must_understand": False, "metadata": {}}

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 
-from . import analyses, checksum, provenance, runinfo
+from . import analyses, checksum, packed, provenance, runinfo
 from .runinfo import RunRecordError
 
 #: how far a real-lab reproduction may differ from the run and still count as reproduced
@@ -125,8 +125,8 @@ def check_record(run_dir: Path, info: dict, verify_store: bool = True) -> None:
         if not path.is_file() or _sha256(path) != code.get("diff_sha256"):
             raise ReproduceRefused(f"{path}: {'missing' if not path.is_file() else 'altered'}; the run's code was "
                                    f"its commit plus this diff")
-    store = run_dir / str(info.get("store") or "run.zarr")
-    if not (store / "zarr.json").is_file():
+    store = packed.run_store(run_dir, info)
+    if not packed.is_store(store):
         raise ReproduceRefused(f"{store}: missing; expected the run's store")
     recorded = info.get("store_checksum")
     if verify_store and recorded:
@@ -197,10 +197,34 @@ def command(run_dir: Path, info: dict, out: Path) -> tuple[list[str], Path]:
 
 
 # ----------------------------------------------------------------------------- comparing
-def _numbers(run_dir: Path, name: str | None) -> tuple[str | None, dict]:
-    """The name and the headline and score numbers of the analysis ``name`` of a run (its
-    current one if ``name`` is None or not kept)."""
-    d = (analyses.find(run_dir, name) if name else None) or analyses.current_dir(run_dir)
+# Settings of an analysis that change how it is drawn or run, not what it finds.
+_PRESENTATION = ("figures", "max_segment_figures", "progress", "memory", "workers")
+
+
+def _settings_differ(a: dict, b: dict) -> int:
+    """How many analysis settings two ``analysis.json`` configs both have and set differently."""
+    fa, fb = runinfo.flatten(a or {}), runinfo.flatten(b or {})
+    return sum(1 for k in set(fa) & set(fb) if fa[k] != fb[k] and not k.startswith(_PRESENTATION))
+
+
+def _like(run_dir: Path, other: Path | None) -> Path | None:
+    """The run's kept analysis made with the settings of the analysis in ``other``: the same
+    name (same settings and inputs on the same code), else the one whose settings differ least
+    (an analysis's name changes with the code), newest first; None without kept analyses."""
+    if other is None:
+        return None
+    meta = analyses.read_meta(other)
+    if meta.get("name") and analyses.find(run_dir, meta["name"]):
+        return analyses.find(run_dir, meta["name"])
+    kept = analyses.listing(run_dir, legacy=False)
+    if not kept:
+        return None
+    best = min(reversed(kept), key=lambda a: _settings_differ(a.get("config"), meta.get("config")))
+    return Path(best["path"])
+
+
+def _numbers(d: Path | None, run_dir: Path) -> tuple[str | None, dict]:
+    """The name and the headline and score numbers of the analysis in ``d`` of a run."""
     if d is None:
         return None, {}
     return ("legacy" if d == run_dir else d.name), runinfo.analysis_numbers(d)
@@ -228,8 +252,8 @@ def compare(original: Path, new: Path, info: dict | None = None) -> Comparison:
     a = info or runinfo.load(original)
     b = runinfo.load(new)
     c = Comparison(real_lab=(a.get("config") or {}).get("hardware", {}).get("backend", "sim") != "sim")
-    sa = a.get("store_checksum") or checksum.store_checksum(original / str(a.get("store") or "run.zarr"))
-    sb = b.get("store_checksum") or checksum.store_checksum(new / str(b.get("store") or "run.zarr"))
+    sa = a.get("store_checksum") or checksum.store_checksum(packed.run_store(original, a))
+    sb = b.get("store_checksum") or checksum.store_checksum(packed.run_store(new, b))
     c.n_arrays = len(sa.get("arrays") or {})
     c.arrays = checksum.differing(sa, sb)
     if a.get("status") != b.get("status"):
@@ -238,8 +262,9 @@ def compare(original: Path, new: Path, info: dict | None = None) -> Comparison:
     fa, fb = runinfo.flatten(a.get("config") or {}), runinfo.flatten(b.get("config") or {})
     c.config = sorted(k for k in set(fa) | set(fb)
                       if fa.get(k) != fb.get(k) and k not in named and not k.startswith(PLACE_KEYS))
-    name_b, nb = _numbers(new, None)
-    name_a, na = _numbers(original, name_b)
+    db = analyses.current_dir(new)
+    name_b, nb = _numbers(db, new)
+    name_a, na = _numbers(_like(original, db) or analyses.current_dir(original), original)
     if name_a != name_b and na:
         c.notes.append(f"the run's analysis {name_a} compared with the reproduction's {name_b}")
     if not na and nb:

@@ -59,6 +59,28 @@ def test_each_analysis_is_kept_and_the_pointer_chooses_the_current_one(tmp_path)
     assert events == ["made", "made", "reused"]
 
 
+def test_a_reproduction_is_compared_with_the_runs_analysis_of_the_same_settings(tmp_path):
+    """The run was re-analysed with DIS after its Farneback analysis; its reproduction (on
+    newer code, so its analysis's name differs) is analysed with Farneback: the comparison
+    reads the run's Farneback analysis, not its current (DIS) one."""
+    from tactile_flow.runstore.reproduce import _like
+
+    def made(run, name, method, created):
+        run.mkdir(exist_ok=True)
+        with analyses.staging(run) as staged:
+            fake_analysis(staged, created * 32)
+            return analyses.commit(run, staged, name, {"analysis_id": created * 32, "created": created, "key": name,
+                                                       "config": {"flow": {"method": method}, "figures": True}})
+
+    run, new = tmp_path / "run", tmp_path / "new"
+    made(run, "farneback-aaa", "farneback", "1")
+    made(run, "dis-bbb", "dis", "2")
+    assert analyses.current_name(run) == "dis-bbb"
+    assert _like(run, made(new, "farneback-ccc", "farneback", "3")) == run / "analyses" / "farneback-aaa"
+    assert _like(run, made(new, "dis-bbb", "dis", "4")) == run / "analyses" / "dis-bbb"       # same name
+    assert _like(tmp_path / "never-analysed", new / "analyses" / "dis-bbb") is None
+
+
 def test_a_forced_replacement_exchanges_the_directories_and_keeps_the_old(tmp_path):
     run = tmp_path / "run"
     run.mkdir()

@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,7 @@ from conftest import record_run
 from tactile_flow.analysis.run import analyze_run
 from tactile_flow.protocols.resume import analysis_state
 from tactile_flow.runstore import analyses
+from tactile_flow.runstore.packed import read_member
 
 pytestmark = pytest.mark.slow
 RUN = [sys.executable, "-c", "from tactile_flow.protocols.cli import main; main()", "progress=false"]
@@ -175,14 +177,19 @@ def test_a_signal_while_the_figure_workers_fork_waits_for_them_and_never_reaches
 
 def whole_current(run_dir: Path) -> str:
     """The current analysis's name, after checking it is whole and the only one the run's paths
-    show: ``summary.json``, ``analysis.zarr`` and ``score.json`` of one analysis (one id),
+    show: ``summary.json``, its store (``analysis.zarr.zip``, or ``analysis.zarr`` of an analysis
+    by 0.2.0 and before) and ``score.json`` of one analysis (one id),
     through ``analysis/`` and the paths of the layout before 0.2 alike; every kept analysis
     whole; nothing half-made visible."""
     current = analyses.current_dir(run_dir)
     assert current is not None and analyses.is_complete(current), current
     summary = json.loads((run_dir / "analysis" / "summary.json").read_text())
     assert summary == json.loads((run_dir / "summary.json").read_text())
-    zattrs = json.loads((run_dir / "analysis.zarr" / "zarr.json").read_text())["attributes"]
+    packed_now = (run_dir / "analysis" / analyses.PACKED_STORE).is_file()
+    for link in ("analysis.zarr", analyses.PACKED_STORE):                 # no store link dangles
+        assert not os.path.lexists(run_dir / link) or (run_dir / link).exists(), link
+    zarr_json = read_member(run_dir / (analyses.PACKED_STORE if packed_now else "analysis.zarr"), "zarr.json")
+    zattrs = json.loads(zarr_json)["attributes"]
     assert zattrs["analysis_id"] == summary["analysis_id"] == json.loads((run_dir / "score.json").read_text())["analysis_id"]
     for kept in analyses.listing(run_dir):
         assert analyses.is_complete(kept["path"]), kept
@@ -237,11 +244,14 @@ def test_a_run_analysed_before_0_2_reads_as_it_is_and_is_adopted_by_the_next_ana
     Outputs of two analyses side by side (a kill in the old code's renames) are incomplete."""
     made = analyze_run(store, FAST, console=lambda *a: None)
     run = store.parent
-    for name in ("summary.json", "analysis.zarr", "score.json", "figures"):      # back to the old layout
+    for name in ("summary.json", "analysis.zarr", "analysis.zarr.zip", "score.json", "figures"):  # the old layout
         if os.path.lexists(run / name):
             os.unlink(run / name)
     for item in (run / "analyses" / made["analysis"]).iterdir():
-        if item.name != "analysis.json":
+        if item.name == analyses.PACKED_STORE:                   # the store was a directory then
+            with zipfile.ZipFile(item) as z:
+                z.extractall(run / "analysis.zarr")
+        elif item.name != "analysis.json":
             os.rename(item, run / item.name)
     shutil.rmtree(run / "analyses")
     os.unlink(run / "analysis")
@@ -259,9 +269,8 @@ def test_a_run_analysed_before_0_2_reads_as_it_is_and_is_adopted_by_the_next_ana
 
     old = run / "old"                                             # two analyses' outputs side by side
     old.mkdir()
-    for name in ("summary.json", "analysis.zarr", "score.json"):
-        shutil.copytree(run / "analyses" / dis["analysis"] / name, old / name) if name.endswith(".zarr") else \
-            shutil.copy(run / "analyses" / dis["analysis"] / name, old / name)
+    for name in ("summary.json", analyses.PACKED_STORE, "score.json"):
+        shutil.copy(run / "analyses" / dis["analysis"] / name, old / name)
     shutil.copy(run / "analyses" / f"legacy-{made['analysis_id'][:8]}" / "summary.json", old / "summary.json")
     assert analyses.state(old) == "incomplete"
 

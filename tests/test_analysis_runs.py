@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 import xarray as xr
 
+from tactile_flow.runstore import open_run
 from tactile_flow.analysis.load import AnalysisInputError
 from tactile_flow.runstore import analyses
 from tactile_flow.analysis.run import analyze_run
@@ -58,7 +59,7 @@ def test_sweep_labels_estimates_and_score(runs, proto, tmp_path):
     assert s["width_error_mm_median"] <= 1.0
     assert s["boundary_error_ms_median"] <= 50
     assert s["texture_angle_error_deg_median"] < 15
-    tree = xr.open_datatree(str(store.parent / "analysis" / "analysis.zarr"), engine="zarr")
+    tree = xr.open_datatree(f"zip::{store.parent / 'analysis' / 'analysis.zarr.zip'}", engine="zarr")
     assert tree["segments"].sizes["segment"] == 11
     assert set(tree["aggregates"]["view"].values) == {"bottom", "left", "right"}
     assert tree["estimates/crossings"]["width"].attrs["units"] == "mm"
@@ -88,12 +89,12 @@ def test_the_same_analysis_is_reused_and_a_forced_one_is_identical_and_keeps_the
     store = _copy(runs["straws_sweep"], tmp_path, "idem")
     cfg = {"progress": False, "figures": True, "max_segment_figures": 2}
     first = analyze_run(store, cfg, console=lambda *a: None)
-    a1 = xr.open_datatree(str(store.parent / "analysis" / "analysis.zarr"), engine="zarr").load()
+    a1 = open_run(store.parent / "analysis" / "analysis.zarr.zip").load()
     lines = []
     again = analyze_run(store, {**cfg, "workers": 1}, console=lines.append)      # workers: not in the key
     assert again["analysis_id"] == first["analysis_id"] and "reused" in lines[0], lines
     second = analyze_run(store, cfg, force=True, console=lambda *a: None)
-    a2 = xr.open_datatree(str(store.parent / "analysis" / "analysis.zarr"), engine="zarr").load()
+    a2 = open_run(store.parent / "analysis" / "analysis.zarr.zip").load()
     for group in ("segments", "aggregates", "whole_run", "estimates/crossings"):
         xr.testing.assert_identical(a1[group].to_dataset(), a2[group].to_dataset())
     assert first["estimates"] == second["estimates"] and first["segments"] == second["segments"]
@@ -156,7 +157,7 @@ def test_missing_groups_no_contact_aborted_and_short_segments(runs, tmp_path):
     s = analyze_run(store, FAST, console=lambda *a: None)
     assert any(x["what"] == "run" and "aborted" in x["reason"] for x in s["skipped"])
     assert s["headline"]["crossings"] == 2
-    assert (store.parent / "analysis" / "summary.json").exists() and (store.parent / "analysis" / "analysis.zarr").exists()
+    assert (store.parent / "analysis" / "summary.json").exists() and (store.parent / "analysis" / "analysis.zarr.zip").is_file()
 
     # a plateau level this close to the peak leaves 'during' segments of < 2 frames
     store = _copy(src, tmp_path, "short")

@@ -164,7 +164,7 @@ def test_nothing_is_written_to_the_working_directory(tmp_path):
     assert (analyze_sweep / "analysis_summary.md").is_file() and (analyze_sweep / "multirun.yaml").is_file()
     proc = command("tactile-import", f"source={ROOT / 'tests' / 'data' / 'biotac_rest_untouched.bag'}", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
-    assert (tmp_path / "outputs" / "imported" / "biotac_rest_untouched" / "run.zarr").is_dir()
+    assert (tmp_path / "outputs" / "imported" / "biotac_rest_untouched" / "run.zarr.zip").is_file()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["multirun", "outputs"]
 
 

@@ -134,6 +134,7 @@ TESTED: dict[str, object] = {
     'python benchmarks/bench_slip_direction.py': BENCH,
     'python benchmarks/bench_slip_direction.py --grid classic': BENCH,
     'python benchmarks/bench_slip_direction.py --grid varied': BENCH,
+    'python benchmarks/bench_slip_direction.py --sensor biotac_sp --seeds 3 --real-touch 0': BENCH,
     'python benchmarks/bench_speed.py': BENCH,
     'python benchmarks/bench_speed.py --only analysis': BENCH,
     'python benchmarks/bench_speed.py --only analysis --repeat 3': BENCH,
@@ -168,7 +169,7 @@ TESTED: dict[str, object] = {
     'tactile-analyze run=PATH [analysis.xxx=...]': "tests/test_analysis_runs.py::test_the_same_analysis_is_reused_and_a_forced_one_is_identical_and_keeps_the_old",
     'tactile-analyze run=outputs/imported/ds':
         "tests/test_import_tree.py::test_a_tree_of_csv_folders_imports_in_one_call_and_analyses",
-    'tactile-analyze run=outputs/imported/rest/run.zarr':
+    'tactile-analyze run=outputs/imported/rest/run.zarr.zip':
         "tests/test_import_bag.py::test_real_resting_recording_analyses_to_no_contact",
     'tactile-analyze run=…': "tests/test_analysis_runs.py::test_the_same_analysis_is_reused_and_a_forced_one_is_identical_and_keeps_the_old",
     'tactile-analyze run=… analysis.tactile.render=exact|linear': "tests/test_analysis_runs.py::test_sweep_labels_estimates_and_score",
@@ -320,7 +321,7 @@ TESTED: dict[str, object] = {
         "tests/test_import_sensors.py::test_a_csv_of_either_biotac_imports_with_its_model_from_the_electrode_count",
     'tactile-import source=press.csv hydra.searchpath=[file://my_conf] sensor=my_pad':
         "tests/test_flat_pad.py::test_the_flat_pad_runs_end_to_end_from_its_yaml_alone",
-    'tactile-analyze run=outputs/imported/classic/run.zarr':
+    'tactile-analyze run=outputs/imported/classic/run.zarr.zip':
         "tests/test_sensor_cli.py::test_the_analysis_reads_a_store_with_its_model_and_refuses_another",
 }
 

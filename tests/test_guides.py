@@ -423,7 +423,7 @@ def test_open_run_example_prints_what_analysis_zarr_holds(there_and_back, tmp_pa
                           capture_output=True, text=True, timeout=300)
     out = ok(proc)
     assert png.stat().st_size > 10_000
-    analysis = xr.open_datatree(run_dir / "analysis" / "analysis.zarr", engine="zarr")
+    analysis = xr.open_datatree(f"zip::{run_dir / 'analysis.zarr.zip'}", engine="zarr")
     seg = analysis["segments"].to_dataset()
     slip = analysis["estimates"]["slip"].to_dataset()
     printed = re.findall(r"^segment (\d+) (\w+) (\w+): ([\d.]+)-([\d.]+) s"

@@ -1,6 +1,7 @@
 """tactile-import on bad input: one clear line, a non-zero exit, nothing left behind."""
 
 import subprocess
+import zipfile
 import sys
 from pathlib import Path
 
@@ -166,7 +167,7 @@ def test_cli_run_exit_codes_and_one_line(tmp_path, capsys):
     assert err.count("\n") == 1 and err.startswith("import error: ") and "rate_hz" in err
     cfg.rate_hz = 100
     assert run(cfg, console=lambda *a: None) == 0
-    assert (tmp_path / "out" / "ok" / "run.zarr" / "zarr.json").is_file()
+    assert zipfile.is_zipfile(tmp_path / "out" / "ok" / "run.zarr.zip")        # packed: one file
     capsys.readouterr()
     assert run(cfg) == 0                                            # done already: skipped
     assert "already imported" in capsys.readouterr().out

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from tactile_flow.runstore import store_url
 from tactile_flow.importers import ImportSettings, import_source, read_bag
 from tactile_flow.importers.bag import MSGTYPE, biotac_typestore
 from tactile_flow.analysis.run import analyze_run
@@ -27,7 +28,7 @@ def test_real_bag_keeps_three_fingers_drops_two(imported):
     assert imported.fingers == ["ff", "mf", "th"]
     assert sorted(imported.dropped) == ["lf", "rf"]
     assert all("-22072" in why for why in imported.dropped.values())
-    dt = xr.open_datatree(imported.store, engine="zarr")
+    dt = xr.open_datatree(store_url(imported.store), engine="zarr")
     b = dt["biotac"]
     assert list(b["finger"].values) == ["ff", "mf", "th"]
     assert b.sizes["time"] == 977 and b["electrodes"].shape == (977, 3, 24)
@@ -43,7 +44,7 @@ def test_real_bag_keeps_three_fingers_drops_two(imported):
 
 
 def test_real_bag_seq_and_times(imported):
-    dt = xr.open_datatree(imported.store, engine="zarr")
+    dt = xr.open_datatree(store_url(imported.store), engine="zarr")
     b = dt["biotac"]
     seq = b["seq"].values
     assert seq[0] == 10195 and np.all(np.diff(seq) == 1)
@@ -62,7 +63,7 @@ def test_real_bag_seq_and_times(imported):
 def test_real_bag_provenance_names_source_and_checksum(imported):
     sha = hashlib.sha256(BAG.read_bytes()).hexdigest()
     assert imported.sha256 == sha
-    dt = xr.open_datatree(imported.store, engine="zarr")
+    dt = xr.open_datatree(store_url(imported.store), engine="zarr")
     prov = dt.attrs["provenance"]
     assert prov["source"]["sha256"] == sha and prov["source"]["path"] == str(BAG.resolve())
     assert prov["importer"]["reader"] == "tactile_flow.importers.bag.read_bag"
@@ -128,7 +129,7 @@ def test_ros2_bag_roundtrip(tmp_path):
     assert rec.meta["seq_source"].startswith("message index")
     (res,) = import_source(bag, tmp_path / "out", ImportSettings(rate_hz=100))
     assert res.fingers == ["ff", "th"] and sorted(res.dropped) == ["lf", "mf", "rf"]
-    dt = xr.open_datatree(res.store, engine="zarr")
+    dt = xr.open_datatree(store_url(res.store), engine="zarr")
     b = dt["biotac"]
     np.testing.assert_array_equal(b["electrodes"].values, written["electrodes"])
     np.testing.assert_array_equal(b["seq"].values, np.arange(150))

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from tactile_flow.runstore import store_url
 from tactile_flow.importers import ImportSettings, import_source, read_bag, select_fingers
 from tactile_flow.tactile.signals import SensorCalibration
 from tactile_flow.analysis.run import analyze_run
@@ -55,7 +56,7 @@ def test_per_finger_prefixes_with_time_column(rest, tmp_path):
     src = write_csv(tmp_path / "hand.csv", rest, channels=("pdc", "tdc", "tac"), time=t)
     (res,) = import_source(src, tmp_path / "out")
     assert res.fingers == ["ff", "mf", "th"] and res.rate_hz == pytest.approx(100.0)
-    dt = xr.open_datatree(res.store, engine="zarr")
+    dt = xr.open_datatree(store_url(res.store), engine="zarr")
     b = dt["biotac"]
     np.testing.assert_array_equal(b["electrodes"].values, rest.electrodes)
     np.testing.assert_array_equal(b["pdc"].values, rest.pdc)
@@ -72,7 +73,7 @@ def test_per_finger_prefixes_with_time_column(rest, tmp_path):
 def test_electrode_only_file_with_rate(rest, tmp_path):
     src = write_csv(tmp_path / "th_only.csv", rest, fingers=["th"], prefixed=False, channels=())
     (res,) = import_source(src, tmp_path / "out", ImportSettings(rate_hz=100, fingers=("th",)))
-    dt = xr.open_datatree(res.store, engine="zarr")
+    dt = xr.open_datatree(store_url(res.store), engine="zarr")
     b = dt["biotac"]
     assert list(b["finger"].values) == ["th"]
     assert "pdc" not in b and "tdc" not in b and "tac" not in b        # not recorded: not stored
@@ -106,7 +107,7 @@ def test_directory_imports_one_store_per_file_with_estimated_baseline(rest, tmp_
     rest_level = rest.electrodes[:, 0].mean(axis=0)
     assert np.abs(est[0] - rest_level).max() < 15                  # the unloaded level, not the pressed one
     for r in res:
-        dt = xr.open_datatree(r.store, engine="zarr")
+        dt = xr.open_datatree(store_url(r.store), engine="zarr")
         assert dt.attrs["baseline"]["method"] == "estimated"
         assert dt.attrs["baseline"]["details"]["files"] == [str(d / "a.csv"), str(d / "b.csv")]
         assert dt["biotac"]["baseline"].dims == ("finger", "taxel")
@@ -123,7 +124,7 @@ def test_calibration_file_per_finger(rest, tmp_path):
     cal_file = tmp_path / "cal.json"
     cal_file.write_text(json.dumps(cals))
     (res,) = import_source(src, tmp_path / "out", ImportSettings(calibration=str(cal_file)))
-    dt = xr.open_datatree(res.store, engine="zarr")
+    dt = xr.open_datatree(store_url(res.store), engine="zarr")
     assert dt.attrs["baseline"]["method"] == "calibration_file"
     assert dt.attrs["baseline"]["details"]["sha256"] and sorted(dt.attrs["calibration"]) == ["ff", "mf"]
     np.testing.assert_allclose(dt["biotac"]["baseline"].values,
@@ -138,7 +139,7 @@ def test_single_sensor_calibration_file(rest, tmp_path):
     cal_file.write_text(json.dumps(cal.to_dict()))
     (res,) = import_source(src, tmp_path / "out", ImportSettings(rate_hz=100, fingers=("mf",),
                                                                  calibration=str(cal_file)))
-    dt = xr.open_datatree(res.store, engine="zarr")
+    dt = xr.open_datatree(store_url(res.store), engine="zarr")
     assert SensorCalibration.from_dict(dt.attrs["calibration"]["mf"]) == cal
 
 

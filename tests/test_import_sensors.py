@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from tactile_flow.runstore import store_url
 from tactile_flow.analysis.run import analyze_run
 from tactile_flow.importers import ImportSettings, import_source
 from tactile_flow.importers.csv import read_csv
@@ -39,7 +40,7 @@ def test_a_csv_of_either_biotac_imports_with_its_model_from_the_electrode_count(
     (res,) = import_source(src, tmp_path / "out", console=lines.append)
     n = builtin_sensor(name).n_taxels
     assert res.sensor == f"{name} (inferred from {n} electrodes per sensor)" and f"sensor {res.sensor}" in lines[0]
-    dt = xr.open_datatree(res.store, engine="zarr")
+    dt = xr.open_datatree(store_url(res.store), engine="zarr")
     assert dt.attrs["sensor"]["name"] == name and dt.attrs["sensor"]["sha256"] == builtin_sensor(name).sha256
     b = dt["biotac"]
     assert b["electrodes"].shape == (len(rec.time), 1, n)
@@ -68,7 +69,7 @@ def test_per_finger_prefixes_pac_samples_and_a_nanosecond_time_column(classic, t
     (res,) = import_source(src, tmp_path / "out", console=lines.append)
     assert res.fingers == ["ff", "th"] and res.rate_hz == pytest.approx(100.0)
     assert "time column in ns (guessed from its median step 1e+07 (100 Hz in ns)" in lines[0]
-    dt = xr.open_datatree(res.store, engine="zarr")
+    dt = xr.open_datatree(store_url(res.store), engine="zarr")
     pac = dt["biotac_pac"]
     assert pac.sizes["time_pac"] == 22 * len(classic.time)
     np.testing.assert_array_equal(pac["pac"].values[:22, 1], classic.pac[0, 1])
@@ -94,7 +95,7 @@ def test_baseline_relative_values_are_detected_and_said(classic, tmp_path):
     (res,) = import_source(src, tmp_path / "out", console=lines.append)
     assert "electrode values relative to rest (electrode values relative to rest (first rows: median" in lines[0]
     assert res.baseline == "relative"
-    b = xr.open_datatree(res.store, engine="zarr")["biotac"]
+    b = xr.open_datatree(store_url(res.store), engine="zarr")["biotac"]
     np.testing.assert_array_equal(b["electrodes"].values[:, 0], classic.electrodes[:, 0] - rest[0] + 2500)
     np.testing.assert_array_equal(b["baseline"].values, np.full((1, 19), 2500.0))
     summary = analyze_run(res.store, QUIET, console=lambda *a: None)
@@ -117,7 +118,7 @@ def test_a_ros1_bag_of_19_electrode_biotacall_messages(classic, tmp_path):
     bag = write_ros1_bag(tmp_path / "classic.bag", classic)
     (res,) = import_source(bag, tmp_path / "out", ImportSettings(rate_hz=100))
     assert res.fingers == ["ff", "th"] and res.sensor.startswith("biotac (inferred from 19")
-    dt = xr.open_datatree(res.store, engine="zarr")
+    dt = xr.open_datatree(store_url(res.store), engine="zarr")
     np.testing.assert_array_equal(dt["biotac"]["electrodes"].values, classic.electrodes)
     np.testing.assert_array_equal(dt["biotac"]["pdc"].values, classic.pdc)
     assert dt["biotac_pac"].sizes["time_pac"] == 22 * len(classic.time)

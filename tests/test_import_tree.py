@@ -14,6 +14,7 @@ import pytest
 import xarray as xr
 
 from conftest import DATA
+from tactile_flow.runstore import store_url
 from tactile_flow.importers import ImportInputError, ImportSettings, import_source, read_bag, select_fingers
 from tactile_flow.importers.importer import ImportIncomplete
 from test_import_csv import write_csv
@@ -57,14 +58,14 @@ def test_a_tree_of_csv_folders_imports_in_one_call_and_analyses(rest, tmp_path):
     proc = subprocess.run([*IMPORT, f"source={tmp_path / 'data'}", f"out={out}", "rate_hz=100", "baseline=estimate"],
                           cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
-    stores = sorted(p.relative_to(out).as_posix() for p in out.rglob("run.zarr"))
-    assert stores == sorted(str(Path(r).with_suffix("") / "run.zarr") for r in rels)      # the tree, mirrored
+    stores = sorted(p.relative_to(out).as_posix() for p in out.rglob("run.zarr.zip"))
+    assert stores == sorted(str(Path(r).with_suffix("") / "run.zarr.zip") for r in rels)  # the tree, mirrored, packed
     files = [str(tmp_path / "data" / r) for r in ["top.csv", "bottle/take1.csv", "bottle/take2.csv",
                                                   "sponge/take1.csv", "sponge/soft/take3.csv"]]
     for rel in rels:
         run_dir = out / Path(rel).with_suffix("")
         sub = Path(rel).parent.as_posix() if "/" in rel else ""
-        tree = xr.open_datatree(run_dir / "run.zarr", engine="zarr")
+        tree = xr.open_datatree(f"zip::{run_dir / 'run.zarr.zip'}", engine="zarr")   # by a string, as users do
         assert tree.attrs["import"]["subfolder"] == sub
         assert tree.attrs["import"]["source"] == str(tmp_path / "data" / rel)
         assert sorted(tree.attrs["baseline"]["details"]["files"]) == sorted(files)          # one pool for all
@@ -73,7 +74,7 @@ def test_a_tree_of_csv_folders_imports_in_one_call_and_analyses(rest, tmp_path):
     analysed = subprocess.run([*ANALYZE, f"run={out}", "analysis.figures=false"], cwd=tmp_path,
                               capture_output=True, text=True, timeout=900)
     assert analysed.returncode == 0, analysed.stderr
-    assert len([s for s in out.rglob("run.zarr") if (s.parent / "analysis" / "summary.json").is_file()]) == len(rels)
+    assert len([s for s in out.rglob("run.zarr.zip") if (s.parent / "analysis" / "summary.json").is_file()]) == len(rels)
     for pressed_take in ("bottle/take1", "sponge/take1"):           # issue 12: every record, the slip fields
         summary = json.loads((out / pressed_take / "analysis" / "summary.json").read_text())
         assert summary["headline"]["fingers_in_contact"] >= 1
@@ -142,7 +143,7 @@ def test_a_jump_of_the_time_column_is_refused_and_a_gap_is_said(rest, tmp_path):
     (res,) = import_source(src, tmp_path / "out", ImportSettings(), console=lines.append)
     assert res.warnings == ["time column: 1 gap(s) longer than 10 x the median step, the largest 5.01 s at line 502"]
     assert "WARNING: time column: 1 gap(s)" in lines[0]
-    assert xr.open_datatree(res.store, engine="zarr").attrs["import"]["reader"]["time_gaps"]["at_line"] == 502
+    assert xr.open_datatree(store_url(res.store), engine="zarr").attrs["import"]["reader"]["time_gaps"]["at_line"] == 502
 
 
 @pytest.mark.slow

@@ -54,6 +54,20 @@ def test_every_path_survives_hydras_override_grammar_quoted():
     assert run_specs([f"run=[{quoted('a,b')},{quoted('c d')}],[{quoted('e=f')}]"]) == ["a,b", "c d", "e=f"]
 
 
+def test_packed_stores_are_found_beside_directory_stores(tmp_path):
+    """An import's run store is one file, ``run.zarr.zip``: a directory, a pattern and the file
+    itself name it as they name a recording's ``run.zarr``; nothing inside a store is a run."""
+    recorded = fake_store(tmp_path / "day" / "a" / "run.zarr")
+    imported = tmp_path / "day" / "b" / "run.zarr.zip"
+    imported.parent.mkdir(parents=True)
+    imported.write_bytes(b"PK")
+    (tmp_path / "day" / "b" / "analyses" / "x").mkdir(parents=True)
+    (tmp_path / "day" / "b" / "analyses" / "x" / "analysis.zarr.zip").write_bytes(b"PK")
+    assert find_stores(str(tmp_path / "day")) == [recorded, imported]
+    assert find_stores(str(tmp_path / "**" / "run.zarr.zip")) == [imported]
+    assert find_stores(str(imported)) == [imported] and find_stores(str(imported.parent)) == [imported]
+
+
 def test_runs_become_jobs_from_directories_patterns_and_lists(tmp_path):
     stores = [fake_store(tmp_path / "day" / name / "run.zarr") for name in NASTY + ["p", "q"]]
     expected = sorted(str(s) for s in stores)
@@ -175,7 +189,7 @@ def test_analysis_sweep_on_submitit_local(recorded, tmp_path):
     assert proc.returncode == 0, proc.stderr
     rows = table(tmp_path)
     assert [(r["run"], r["result"]) for r in rows] == [(str(runs / n / "run.zarr"), "analysed") for n in "ab"]
-    assert (runs / "b" / "analysis" / "analysis.zarr").is_dir()
+    assert (runs / "b" / "analysis" / "analysis.zarr.zip").is_file()
 
 
 @pytest.mark.slow

@@ -73,6 +73,20 @@ def test_a_record_analysed_in_pieces_gives_the_results_of_the_record_analysed_wh
         np.testing.assert_allclose(p["cop"], w["cop"], rtol=1e-9)
 
 
+def test_a_long_record_packed_is_read_in_pieces_from_the_zip_with_the_same_results(long_store, tmp_path):
+    """A long import is packed (``run.zarr.zip``): the analysis reads its electrodes a stretch at
+    a time from the zip (the chunks it needs, never the whole array) and finds what it finds in
+    the directory store."""
+    from tactile_flow.runstore import packed
+    zipped = packed.pack(long_store, tmp_path / "run.zarr.zip")
+    run_d, directory = _analysis(long_store, PIECES)
+    run_z, zip_pieces = _analysis(zipped, PIECES)
+    assert isinstance(run_z.electrodes, StoredElectrodes) and run_z.input_sha256 == run_d.input_sha256
+    assert zip_pieces.contacts == directory.contacts and zip_pieces.slips.keys() == directory.slips.keys()
+    assert [(s.label, s.finger, s.start, s.stop) for s in zip_pieces.segments] == \
+        [(s.label, s.finger, s.start, s.stop) for s in directory.segments]
+
+
 def test_tactile_analyze_streams_a_long_record_and_says_so_in_the_summary(long_store, tmp_path):
     """The command line: a record longer than chunk_frames is analysed, with figures, and the
     summary states how it was prepared."""

@@ -129,7 +129,7 @@ def test_every_command_runs_from_an_empty_directory_with_the_checkouts_results(i
     _run([installed / "tactile-analyze", f"run={run_dir / 'run.zarr'}", "analysis.figures=false",
           "analysis.progress=false"], here, env)
     imported = _run([installed / "tactile-import", f"source={BAG}", "out=imported"], here, env)
-    assert list((here / "imported").rglob("run.zarr")), imported.stdout
+    assert list((here / "imported").rglob("run.zarr.zip")), imported.stdout
     _run([installed / "tactile-recover", "--help"], here, env)
     for command in ("tactile-emulate", "tactile-view", "tactile-demo"):
         assert "usage" in _run([installed / command, "--help"], here, env).stdout.lower()

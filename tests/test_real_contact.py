@@ -225,7 +225,9 @@ def _rewrite_store(src: Path, dst: Path, edit) -> Path:
     import warnings
 
     import xarray as xr
-    tree = xr.open_datatree(str(src), engine="zarr").load()
+
+    from tactile_flow.runstore import open_run
+    tree = open_run(src).load()                  # a recording's directory store or an import's packed one
     d = edit({node.path: node.to_dataset() for node in tree.subtree})
     dst.mkdir()
     with warnings.catch_warnings():

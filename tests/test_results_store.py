@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 import warnings
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -81,6 +82,27 @@ def test_write_tree_writes_what_xarrays_consolidated_writer_writes(tmp_path):
     np.testing.assert_array_equal(back["fields/th_1_left"]["dynamic"].values, _long_field())
     assert len([k for k in ours if k.startswith("fields/th_1_left/dynamic/c/")]) == 2 * 2 * 2 - 2
     assert back.attrs["provenance"] == {"config": {"a": 1}, "code": None}
+
+
+def test_write_tree_packed_is_the_same_members_in_one_zip_that_xarray_opens_by_a_string(tmp_path):
+    """``analysis.zarr.zip``: the directory store's files as the members of one zip (metadata
+    deflated, chunks stored), read back by xarray through its ``zip::`` URL and by the opener."""
+    from tactile_flow.runstore import open_run
+    tree = _tree()
+    write_tree(tree, tmp_path / "analysis.zarr")
+    write_tree(tree, tmp_path / "analysis.zarr.zip")
+    with zipfile.ZipFile(tmp_path / "analysis.zarr.zip") as z:
+        members = {i.filename: (z.read(i), i.compress_type) for i in z.infolist()}
+    assert {k: v[0] for k, v in members.items()} == _files(tmp_path / "analysis.zarr")
+    assert {k for k, v in members.items() if v[1] == zipfile.ZIP_DEFLATED} == {k for k in members
+                                                                              if k.endswith("zarr.json")}
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []   # no temporary file left
+    for back in (xr.open_datatree(f"zip::{tmp_path / 'analysis.zarr.zip'}", engine="zarr").load(),
+                 open_run(tmp_path / "analysis.zarr.zip").load()):
+        np.testing.assert_array_equal(back["fields/th_1_left"]["dynamic"].values, _long_field())
+        assert back["segments"]["label"].values.tolist() == ["before", "during"]
+    with pytest.raises(FileExistsError):                               # written once, never over a store
+        write_tree(tree, tmp_path / "analysis.zarr.zip")
 
 
 def _store(path: Path) -> Path:

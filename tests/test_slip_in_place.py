@@ -358,3 +358,25 @@ def test_the_analysis_reads_the_slip_and_meets_its_targets(cli_runs, kind, tare,
     else:              # dated inside the motion (how close to the breakaway: benchmarks/bench_slip_direction.py)
         m = score["object_motions"][0]
         assert m["start"] - 0.2 <= slip["slip_onset_s"] <= m["end"] and slip["slip_onset_uncertainty_s"] > 0, m
+
+
+@pytest.mark.slow
+def test_a_light_twist_that_drifts_back_is_read_as_a_twist(tmp_path):
+    """The SP grid's light (1.3 N) counter-clockwise twist on the flat board without tare: the
+    pattern turns the right way while the board turns, then drifts back, so the flows' end
+    values average below ``min_rotation_deg`` (round 2 read it as a touch). Its centre of
+    pressure stays in place, so the decision reads how far it turned: a rotation, the right
+    sense, dated."""
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.load import load_run, open_truth
+    from tactile_flow.analysis.pipeline import analyse
+    from tactile_flow.analysis.score import score
+    c = Condition("rotate", rotation_deg=30.0, press_force=1.3, surface="flat", tare=False)
+    r = run_slip_in_place(tmp_path / "run", c)
+    assert r.status == "success", r.error
+    a = analyse(load_run(r.store), load_config({"figures": False, "progress": False}))
+    slip = a.slips[score(a, open_truth(r.store))["object_motions"][0]["segment"]]
+    rot = slip["evidence"]["rotation"]
+    assert abs(rot["rotation_deg"]) < 0.9 and rot["read_as"] == "peak", rot   # the end values alone miss it
+    assert slip["slip_class"] == "rotation" and slip["rotation_deg"] > 0.9, rot
+    assert slip["slip_onset_s"] is not None

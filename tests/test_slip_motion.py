@@ -111,3 +111,56 @@ def test_a_twists_release_is_dated_along_the_pattern_the_stuck_skin_built_up():
     along = {"motion_frame": 20, "slip_frame": 52, "uncertainty_frames": 1.0}
     _release(along, raw, 20, 100.0, twist)
     assert along["dated_by"] == "release" and abs(along["slip_frame"] - 60) <= 3
+
+
+def _slip_cfg():
+    from tactile_flow.analysis.config import Slip
+    return Slip()
+
+
+def test_a_twist_whose_flows_drifted_back_is_read_by_how_far_it_turned():
+    """The SP grid's light twist on the flat board without tare: the pattern turned 1.35° while
+    the board turned, then its dynamic flow drifted back (−0.58°) against the static flow (+0.82°),
+    so their end values average 0.12°, below ``min_rotation_deg``; its centre of pressure stayed
+    within 0.83 mm. A contact that stayed in place is read by how far it turned: a rotation, the
+    right sense."""
+    from tactile_flow.analysis.slip import classify, turn
+    cfg = _slip_cfg()
+    rotation = {"rotation_deg": 0.12, "dynamic_deg": -0.58, "static_deg": 0.82, "peak_deg": 1.35}
+    assert turn(0.83, rotation, cfg) == (1.35, "peak")
+    cls, confidence = classify(0.83, rotation, 2.74, None, cfg)
+    assert cls == "rotation" and 0.5 < confidence <= 1.0
+    # the same contact read by its end values alone is a touch (round 2's miss)
+    assert classify(0.83, {**rotation, "peak_deg": None}, 2.74, None, cfg)[0] == "none"
+
+
+def test_a_pull_is_read_by_its_end_values_so_its_spurious_turn_on_the_way_stays_a_pull():
+    """A 5 N pull at 300° on the flat board: the rendered pattern turned up to 2.3° on the way
+    (a pull's spurious turn grows with its length), its flows' end values average 1.4°. It moved
+    2.9 mm: its turn is read by the end values, and the arc they sweep at its radius is below
+    ``arc_ratio`` of the displacement — a translation, as the peak alone would not have it."""
+    from tactile_flow.analysis.slip import classify, turn
+    cfg = _slip_cfg()
+    rotation = {"rotation_deg": 1.38, "dynamic_deg": -0.86, "static_deg": 3.61, "peak_deg": 2.26}
+    assert turn(2.87, rotation, cfg) == (1.38, "end")
+    assert classify(2.87, rotation, 3.50, 0.9, cfg)[0] == "translation"
+    assert classify(2.87, {**rotation, "rotation_deg": 2.26}, 3.50, 0.9, cfg)[0] == "rotation"
+
+
+def test_a_still_touch_with_a_small_turn_stays_a_touch():
+    """A real contact frame held under the real sensor's drift turns its flows by up to 0.86° at
+    the most over a record (tests/real_touch.py, 180 records): below ``min_rotation_deg``, a touch."""
+    from tactile_flow.analysis.slip import classify
+    cfg = _slip_cfg()
+    assert classify(0.02, {"rotation_deg": 0.82, "peak_deg": 0.86}, 3.0, None, cfg)[0] == "none"
+    assert classify(0.02, {"rotation_deg": 0.0, "peak_deg": None}, 3.0, None, cfg)[0] == "none"
+
+
+def test_a_still_contact_turned_late_is_read_by_its_end_values():
+    """A firm twist that reaches its turn only in the contact's last frames: the 90th percentile
+    over the contact (0.75°) under-reads it, the end values (0.92°) do not — the larger is read."""
+    from tactile_flow.analysis.slip import classify, turn
+    cfg = _slip_cfg()
+    rotation = {"rotation_deg": -0.92, "peak_deg": -0.75}
+    assert turn(0.85, rotation, cfg) == (-0.92, "end")
+    assert classify(0.85, rotation, 3.43, None, cfg)[0] == "rotation"

@@ -37,6 +37,8 @@ from tactile_flow.analysis.pipeline import get_model
 from tactile_flow.analysis.preprocess import PreparedRun, prepare
 from tactile_flow.tactile.aggregate import aggregate_flow
 from tactile_flow.tactile.flow import FlowEstimator
+from tactile_flow.runstore import packed
+from tactile_flow.runstore.reader import open_run
 from tactile_flow.tactile.sensor import SensorModelError
 
 from . import draw
@@ -130,15 +132,18 @@ class Scene:
 
 
 def find_store(run_dir) -> Path:
-    """``RUN_DIR/run.zarr`` (or ``run_dir`` itself if it is a run store); :class:`SceneError` if neither."""
+    """``RUN_DIR/run.zarr`` or ``RUN_DIR/run.zarr.zip`` (or ``run_dir`` itself if it is a run
+    store of either layout); :class:`SceneError` if neither."""
     path = Path(run_dir)
     if not path.exists():
         raise SceneError(f"{path}: no such run directory")
-    if (path / "zarr.json").is_file():
+    if packed.is_store(path):
         return path
-    if (path / "run.zarr").is_dir():
-        return path / "run.zarr"
-    raise SceneError(f"{path}: not a run directory (expected run.zarr inside it, as tactile-run writes)")
+    store = packed.find(path)
+    if store is not None:
+        return store                            # load_run says what is wrong with it, if anything
+    raise SceneError(f"{path}: not a run directory (expected run.zarr inside it, as tactile-run writes, "
+                     f"or run.zarr.zip, as tactile-import writes)")
 
 
 def load_scene(run_dir, fps: float = DEFAULT_FPS) -> Scene:
@@ -219,8 +224,7 @@ def _summary(run_dir: Path, notes: list) -> dict | None:
 
 def _groups(store: Path) -> dict:
     """The ``pour`` and ``live`` groups as plain arrays (absent groups are left out)."""
-    import xarray as xr
-    tree = xr.open_datatree(str(store), engine="zarr", consolidated=True)
+    tree = open_run(store)
     out = {}
     if "pour" in tree.children:
         p = tree["pour"].to_dataset()
