@@ -112,7 +112,7 @@ class AnalysisConfig:
     workers: int | None = None               # flow job threads, figure and first-run compile processes; None: the cores available
     intensity: str = "contact"
     save_fields: bool = False
-    figures: bool = True
+    figures: bool | tuple[str, ...] = True   # true: every figure; false: none; or the kinds to draw (FIGURE_KINDS)
     max_segment_figures: int = 12
     progress: bool = True
     raw: dict = field(default_factory=dict, compare=False)   # the node as given (for provenance)
@@ -138,6 +138,27 @@ def _plain(node) -> dict:
     if not isinstance(node, dict):
         raise AnalysisConfigError(f"analysis: expected a mapping, got {type(node).__name__}")
     return json.loads(json.dumps(node))
+
+
+FIGURE_KINDS = ("electrodes", "pressure", "taxels", "ellipsoid", "flow")
+"""The figures ``analysis.figures`` can name: ``electrodes.png``, ``pressure.png``, ``taxels.png``,
+``ellipsoid.png`` and ``flow`` (every ``flow_<label>.png``)."""
+
+
+def _figures(value) -> bool | tuple[str, ...]:
+    """``analysis.figures``: true (every figure), false (none), or a list of :data:`FIGURE_KINDS`
+    (e.g. ``[pressure, flow]``: what one reads of each short record of a dataset), kept in the
+    order of :data:`FIGURE_KINDS` (an empty list is false)."""
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
+        unknown = [v for v in value if v not in FIGURE_KINDS]
+        if not unknown:
+            return tuple(k for k in FIGURE_KINDS if k in value) or False
+        raise AnalysisConfigError(f"analysis.figures: unknown figure {unknown[0]!r}; expected true, false or a list "
+                                  f"of {', '.join(FIGURE_KINDS)}")
+    raise AnalysisConfigError(f"analysis.figures: expected true, false or a list of {', '.join(FIGURE_KINDS)}, "
+                              f"got {value!r}")
 
 
 def _typed(key: str, value, kind):
@@ -276,8 +297,10 @@ def _load_config(node) -> AnalysisConfig:
         sl["views"] = tuple(sl["views"])
     slip = _section(Slip, "slip", sl)
     memory = _section(Memory, "memory", d.get("memory") or {})
-    top = {k: _typed(k, d[k], t) for k, t in (("enabled", bool), ("save_fields", bool), ("figures", bool),
+    top = {k: _typed(k, d[k], t) for k, t in (("enabled", bool), ("save_fields", bool),
                                               ("max_segment_figures", int), ("progress", bool)) if k in d}
+    if "figures" in d:
+        top["figures"] = _figures(d["figures"])
     if d.get("workers") is not None:
         top["workers"] = _typed("workers", d["workers"], int)
         if top["workers"] < 1:

@@ -534,12 +534,17 @@ def plan(a, cfg) -> tuple[list[tuple[str, list]], list[str]]:
 
 
 def figure_jobs(a, model, cfg) -> tuple[list[tuple[str, Callable]], list[str]]:
-    """Every figure to draw, as (file name, builder) pairs in order (a builder returns the
-    Figure; a label none of whose segments has flow gets none), and the flow labels the cap
-    left out. The builders only draw: what needs OpenCV (the flow figures' mean fields) is
+    """Every figure to draw (of the kinds ``cfg.figures`` names, or all), as (file name, builder)
+    pairs in order (a builder returns the Figure; a label none of whose segments has flow gets
+    none), and the flow labels the cap left out. The builders only draw: what needs OpenCV (the flow figures' mean fields) is
     computed here, so they can run in processes forked from this one."""
-    jobs = [("electrodes.png", partial(electrodes, a)), ("pressure.png", partial(pressure, a)),
-            ("taxels.png", partial(taxels, a)), ("ellipsoid.png", partial(ellipsoid, a, model))]
+    from .config import FIGURE_KINDS
+    kinds = FIGURE_KINDS if cfg.figures is True else cfg.figures or ()
+    jobs = [(f"{kind}.png", partial(build, *args)) for kind, build, args in (
+        ("electrodes", electrodes, (a,)), ("pressure", pressure, (a,)), ("taxels", taxels, (a,)),
+        ("ellipsoid", ellipsoid, (a, model))) if kind in kinds]
+    if "flow" not in kinds:
+        return jobs, []
     rows = {r["segment"]: r for r in a.aggregates}
     drawn, left_out = plan(a, cfg)
     estimator = tflow.FlowEstimator(cfg.tactile.flow)

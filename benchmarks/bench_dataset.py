@@ -12,7 +12,7 @@ as its own process, the way a researcher runs them:
 
 1. ``tactile-import source=DATASET rate_hz=100 out=IMPORTED workers=N``;
 2. ``tactile-analyze run=IMPORTED workers=N`` (every run below it, figures on; off with
-   ``--no-figures``).
+   ``--no-figures``; only some with ``--figures pressure,flow``: ``analysis.figures=[pressure,flow]``).
 
 once with ``N`` = the cores available (``--workers``) and once with one worker (today's one
 process), taking turns (``--repeat``), so their ratio is paired (the machine is shared and
@@ -181,7 +181,16 @@ def files_per_record(imported: Path) -> dict:
     return out
 
 
-FIGURES = {"on": True}
+FIGURES = {"on": True, "only": None}
+
+
+def figure_overrides(before: bool = False) -> list[str]:
+    """The ``analysis.figures`` override of the passes (the code before has no list: every figure)."""
+    if not FIGURES["on"]:
+        return ["analysis.figures=false"]
+    if FIGURES["only"] and not before:
+        return [f"analysis.figures=[{','.join(FIGURES['only'])}]"]
+    return []
 
 
 def one_pass(code: str, tree: Path | None, dataset: Path, work: Path, n: int, workers: int | None) -> dict:
@@ -195,7 +204,7 @@ def one_pass(code: str, tree: Path | None, dataset: Path, work: Path, n: int, wo
                                                    *extra], work)
     c1 = cpu_children()
     ana = timed(launcher(tree, "analysis.cli") + [f"run={imported}", "analysis.progress=false", *extra,
-                                                  *([] if FIGURES["on"] else ["analysis.figures=false"])], work)
+                                                  *figure_overrides(code.endswith("before"))], work)
     c2 = cpu_children()
     out = {"code": code, "workers": workers, "records": n, "import_wall_s": imp["wall_s"],
            "import_cpu_s": round(c1 - c0, 2), "analyze_wall_s": ana["wall_s"], "analyze_cpu_s": round(c2 - c1, 2)}
@@ -244,12 +253,15 @@ def main(argv=None) -> int:
     p.add_argument("--workers", type=int, default=None, help="import and analysis workers (default: the cores)")
     p.add_argument("--before", type=Path, default=None, help="a checkout of older code to compare with too")
     p.add_argument("--no-figures", action="store_true", help="analyse with analysis.figures=false")
+    p.add_argument("--figures", default=None, help="draw only these figures, e.g. pressure,flow (analysis.figures="
+                                                   "[pressure,flow]; the code before draws them all)")
     p.add_argument("--repeat", type=int, default=1, help="passes of each, taking turns")
     p.add_argument("--dir", type=Path, default=None, help="work here (kept; the dataset reused) instead of a "
                                                           "temporary directory")
     a = p.parse_args(argv)
     n = 3000 if a.large else a.records
     FIGURES["on"] = not a.no_figures
+    FIGURES["only"] = [f.strip() for f in a.figures.split(",") if f.strip()] if a.figures else None
     workers = a.workers or cores()
     work = a.dir or Path(tempfile.mkdtemp(prefix="bench_dataset_"))
     work.mkdir(parents=True, exist_ok=True)
@@ -274,7 +286,7 @@ def main(argv=None) -> int:
                 r["load"] = round(os.getloadavg()[0], 2)
                 results[code].append(r)
                 emit(measure="pass", repeat=rep, **r)
-        summary = {"records": n, "figures": FIGURES["on"], "cores": cores(), "workers": workers, "load_before": load_before,
+        summary = {"records": n, "figures": (FIGURES["only"] or True) if FIGURES["on"] else False, "cores": cores(), "workers": workers, "load_before": load_before,
                    "load_after": round(os.getloadavg()[0], 2)}
         for code, rs in results.items():
             summary[f"{code}_records_per_s"] = [r["records_per_s"] for r in rs]

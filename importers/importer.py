@@ -17,6 +17,7 @@ every staging directory.
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 import json
 from dataclasses import dataclass, field, fields
@@ -268,6 +269,7 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
     ``progress``: one progress line (on a terminal) of files done, total and rate.
     """
     from tactile_flow.cliapp.workers import each_in_workers, resolve_workers
+    from tactile_flow.runstore.catalogue import kept_open
     from tactile_flow.runstore.provenance import same_code
     settings = settings or ImportSettings()
     check_settings(settings)
@@ -309,7 +311,7 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
     bar = progress_bar(total=len(scanned), unit="file", desc="import: reading", disable=not progress,
                        dynamic_ncols=True)
     say = (lambda line: bar.write(line)) if not bar.disable else console
-    with same_code(), bar:
+    with same_code(), kept_open(), bar:
         prepared = {}
         for i, got in each_in_workers(_prepare_one, [(src, settings) for src in scanned], workers):
             src = scanned[i]
@@ -357,11 +359,9 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
                 p, b = prepared[src], own[src] or baseline
                 staging = staging_dir(src.target(out))
                 staged.append(staging)
-                import_attrs, prov = run_metadata(src, p, b, config_yaml, overrides, len(writing))
-                import_attrs["options"] = options
-                jobs.append((p, staging, prov, import_attrs, b))
+                jobs.append((src, p, staging, b, config_yaml, overrides, len(writing), options))
             for i, got in each_in_workers(_write_one, jobs, workers):
-                src, (p, staging, _, import_attrs, b) = writing[i], jobs[i]
+                src, (_, p, staging, b, *_) = writing[i], jobs[i]
                 bar.update(1)
                 if isinstance(got, ImportInputError):  # found while writing (a rate that disagrees, a changed file)
                     if single:
@@ -372,8 +372,9 @@ def import_source(source, out, settings: ImportSettings | None = None, *, config
                 if isinstance(got, BaseException):
                     raise got
                 target = src.target(out)
+                got, sha256 = got
                 publish([(staging, target)])                    # complete: it appears as a run
-                r = ImportResult(str(src.path), import_attrs["sha256"], str(target), str(target / PACKED),
+                r = ImportResult(str(src.path), sha256, str(target), str(target / PACKED),
                                  list(p.fingers), p.decision["dropped"], p.scan.frames, got["rate_hz"],
                                  b.method if b else "none", reader_warnings(p.reader.meta), src.subfolder,
                                  f"{p.sensor.name} ({p.sensor_how})", reader_notes(p.reader.meta))
@@ -402,10 +403,15 @@ def _prepare_one(job) -> PreparedSource:
     return prepare(*job)
 
 
-def _write_one(job) -> dict:
-    """:func:`.writer.write_run` of ``(prepared, staging, provenance, import_attrs, baseline)`` (a
-    worker's job); its summary."""
-    return write_run(*job)
+def _write_one(job) -> tuple[dict, str]:
+    """:func:`run_metadata` then :func:`.writer.write_run` of ``(source, prepared, staging,
+    baseline, config_yaml, overrides, files in the import, options)`` (a worker's job, so the
+    metadata of every file, ~7 ms each, is not gathered in the parent before the workers
+    start); its summary and the source's SHA-256."""
+    src, p, staging, b, config_yaml, overrides, n_sources, options = job
+    import_attrs, prov = run_metadata(src, p, b, config_yaml, overrides, n_sources)
+    import_attrs["options"] = options
+    return write_run(p, staging, prov, import_attrs, b), import_attrs["sha256"]
 
 
 def result_line(r: ImportResult) -> str:
@@ -543,13 +549,18 @@ def run_metadata(src: Source, prepared: PreparedSource, baseline: Baseline | Non
     return import_attrs, prov
 
 
+@functools.cache
+def _version(name: str) -> str:
+    """An installed package's version, asked once per process (~1.5 ms each time)."""
+    try:
+        return importlib.metadata.version(name)
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
 def _importer(src: Source) -> dict:
     """Which code read the file: module, function, package versions."""
-    def version(name):
-        try:
-            return importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
-            return "unknown"
+    version = _version
     fn = "tactile_flow.importers.bag.read_bag" if src.kind == "bag" else "tactile_flow.importers.csv.read_csv"
     out = {"name": "tactile-import", "reader": fn, "tactile-flow": version("tactile-flow")}
     if src.kind == "bag":

@@ -369,11 +369,17 @@ def order_statistics(chunks: Callable[[], Iterable[np.ndarray]], ranks) -> list[
     return [_float_of_key(p) for p, _ in state]
 
 
+IN_MEMORY_MEDIAN = 1 << 20
+"""Up to this many values (8 MB of float64) :func:`median_of` reads them once into memory."""
+
+
 def median_of(chunks: Callable[[], Iterable[np.ndarray]], n: int) -> float:
     """``np.median`` of the ``n`` values ``chunks()`` yields (see :func:`order_statistics`),
     bit for bit: the middle value, or the mean of the two middle ones. NaN for ``n = 0``."""
     if n <= 0:
         return float("nan")
+    if n <= IN_MEMORY_MEDIAN:                   # a short record: one read, not the four passes below
+        return float(np.median(np.concatenate([np.asarray(a, np.float64) for a in chunks()])))
     if n % 2:
         return order_statistics(chunks, [n // 2])[0]
     a, b = order_statistics(chunks, [n // 2 - 1, n // 2])

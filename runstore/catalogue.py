@@ -33,6 +33,7 @@ import re
 import sqlite3
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from . import runinfo
@@ -582,15 +583,55 @@ def diff(a: Path, b: Path, show_all: bool = False) -> str:
     return "\n".join(out)
 
 
+_KEPT: dict | None = None
+"""While :func:`kept_open` is entered: (process id, catalogue file) → its open :class:`Catalogue`."""
+
+
+@contextmanager
+def kept_open():
+    """Within the block, :func:`register_quietly` keeps the default catalogue open between runs:
+    one connection per process (a worker forked inside the block opens its own, closed when it
+    ends), not one per run (opening and closing it, a WAL checkpoint each time, was ~5 ms of
+    a short record's import or analysis). Each run is still its own committed transaction.
+    Nested: the outer block's."""
+    global _KEPT
+    outer = _KEPT
+    if outer is not None:
+        yield
+        return
+    _KEPT = {}
+    try:
+        yield
+    finally:
+        kept, _KEPT = _KEPT, None
+        for (pid, _), cat in kept.items():
+            if pid == os.getpid():
+                cat.close()
+
+
+def _open_for_register(console) -> tuple[Catalogue, bool]:
+    """The default catalogue and whether the caller closes it (not while :func:`kept_open`)."""
+    if _KEPT is None:
+        return Catalogue.open(console=console), True
+    key = (os.getpid(), str(default_path()))
+    cat = _KEPT.get(key)
+    if cat is None:
+        cat = _KEPT[key] = Catalogue.open(console=console)
+        import multiprocessing.util                 # a forked worker runs no atexit: closed as it exits
+        multiprocessing.util.Finalize(cat, cat.close, exitpriority=10)
+    return cat, False
+
+
 def register_quietly(run_dir, console=None) -> None:
     """Register ``run_dir`` in the default catalogue; never raises (a run's end must not fail
     on its index: ``tactile-runs index`` adds it later). A problem is one line on ``console``."""
     try:
-        cat = Catalogue.open(console=console or (lambda *_: None))
+        cat, close = _open_for_register(console or (lambda *_: None))
         try:
             cat.register(run_dir)
         finally:
-            cat.close()
+            if close:
+                cat.close()
     except Exception as exc:  # noqa: BLE001
         if console is not None:
             console(f"catalogue: {run_dir} not registered ({type(exc).__name__}: {exc}); tactile-runs index adds it")

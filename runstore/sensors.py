@@ -17,6 +17,12 @@ from tactile_flow.tactile.sensor import (SensorModel, SensorModelError, builtin_
 
 __all__ = ["recorded_sensor", "require_same_sensor"]
 
+_READ: dict[str, SensorModel] = {}
+"""Recorded models already read in this process, by their checksum: reading one (its checks,
+its surface's fit) is a pure function of its content, and every store of a dataset records
+the same one (~10 ms a store otherwise, twice per analysis)."""
+_READ_MAX = 16
+
 
 def recorded_sensor(attrs: dict, n_taxels: int, where: str) -> tuple[SensorModel, str]:
     """The sensor model a store was recorded with and how it was found (``recorded`` or
@@ -36,7 +42,12 @@ def recorded_sensor(attrs: dict, n_taxels: int, where: str) -> tuple[SensorModel
                                                    f"were altered", f"{where}")
         # read with today's schema: a field added since takes its default, and the model's
         # checksum is then that of today's form (what a model asked for is compared with)
-        model = load_sensor(spec, file=f"{where} (attribute sensor_model)")
+        model = _READ.get(stored)
+        if model is None:
+            model = load_sensor(spec, file=f"{where} (attribute sensor_model)")
+            if len(_READ) >= _READ_MAX:
+                _READ.pop(next(iter(_READ)))
+            _READ[stored] = model
         if model.n_taxels != n_taxels:
             raise SensorModelError("sensor_model", f"has {model.n_taxels} taxels but the store's electrodes have "
                                                    f"{n_taxels}; the store's attributes were altered", f"{where}")

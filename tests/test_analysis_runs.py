@@ -267,3 +267,27 @@ def test_a_reanalysis_links_the_figures_whose_inputs_it_shares_and_they_are_as_d
     before = _figures(kept / "flow")
     analyze_run(store, {**base, **changes["flow"]}, name="flow", force=True, console=lambda *a: None)
     assert analyses.read_meta(kept / "flow")["figures_reused"] == [] and _figures(kept / "flow") == before
+
+
+def test_figures_named_draws_only_those_the_same_files_and_the_rest_later(runs, tmp_path):
+    """``figures=[pressure, flow]`` (what one reads of each short record of a dataset) draws
+    pressure.png and the flow figures, byte for byte those an analysis with every figure draws;
+    a later analysis with every figure links them and draws only the others; an unknown
+    figure is refused, naming the ones there are."""
+    from tactile_flow.analysis.config import AnalysisConfigError, load_config
+    store = _copy(runs["straws_sweep"], tmp_path, "named")
+    base = {"progress": False, "workers": 1, "max_segment_figures": 2}
+    summary = analyze_run(store, {**base, "figures": ["flow", "pressure"]}, name="named", console=lambda *a: None)
+    kept = store.parent / "analyses"
+    named = _figures(kept / "named")
+    assert sorted(summary["figures"]) == sorted(named)
+    assert "pressure.png" in named and len(named) == 3 and all(n == "pressure.png" or n.startswith("flow_")
+                                                                for n in named)
+    lines = []
+    analyze_run(store, {**base, "figures": True}, name="all", console=lines.append)
+    every = _figures(kept / "all")
+    assert len(every) == 4 + len(named) - 1 and {n: every[n] for n in named} == named
+    assert sorted(analyses.read_meta(kept / "all")["figures_reused"]) == sorted(named)
+    with pytest.raises(AnalysisConfigError, match="unknown figure 'pressur'.*electrodes, pressure"):
+        load_config({"figures": ["pressur"]})
+    assert load_config({"figures": []}).figures is False
