@@ -338,15 +338,22 @@ def _old_paths_follow(run_dir: Path) -> None:
     in the run directory as links into ``analysis/`` (made once; a legacy file there is
     adopted first). Those the current analysis may lack (:data:`OPTIONAL`: a run without
     ground truth has no score; an analysis has its store in one layout) are linked only when
-    it has them, and such a link of ours is removed when it has not (it would dangle)."""
+    it has them, and such a link of ours is removed when it has not (it would dangle). A link
+    there that is not ours (planted, or pointing out of the run) is replaced by ours — by one
+    rename, never writing through it — or removed where the current analysis lacks the file:
+    these paths always read the current analysis."""
     fd = os.open(run_dir, os.O_RDONLY | os.O_DIRECTORY)
     try:
         for name in FOLLOW:
             ours = f"{CURRENT}/{name}"
             has = name not in OPTIONAL or os.path.lexists(run_dir / CURRENT / name)
             if os.path.lexists(run_dir / name):
-                if not has and os.path.islink(run_dir / name) and os.readlink(run_dir / name) == ours:
+                if os.path.islink(run_dir / name) and not has:
                     os.unlink(name, dir_fd=fd)
+                elif os.path.islink(run_dir / name) and os.readlink(run_dir / name) != ours:
+                    aside = f".{name}.{os.getpid()}.link"
+                    os.symlink(ours, aside, dir_fd=fd)
+                    os.rename(aside, name, src_dir_fd=fd, dst_dir_fd=fd)
                 continue
             if not has:
                 continue

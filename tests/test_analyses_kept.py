@@ -81,6 +81,25 @@ def test_a_reproduction_is_compared_with_the_runs_analysis_of_the_same_settings(
     assert _like(tmp_path / "never-analysed", new / "analyses" / "dis-bbb") is None
 
 
+def test_links_planted_where_the_current_analysis_is_read_are_replaced_never_written_through(tmp_path):
+    """``RUN/summary.json`` and ``RUN/analysis.zarr.zip`` planted as links to a file outside
+    the run: the next analysis points the first at itself and removes the second (this
+    analysis has no packed store); the file outside is never touched."""
+    run = tmp_path / "run"
+    run.mkdir()
+    make(run, "farneback-aaa", "1" * 32)
+    victim = tmp_path / "outside.zip"
+    victim.write_bytes(b"precious")
+    for name in ("summary.json", "analysis.zarr.zip"):
+        (run / name).unlink(missing_ok=True)
+        (run / name).symlink_to(victim)
+    make(run, "dis-bbb", "2" * 32)
+    assert os.readlink(run / "summary.json") == "analysis/summary.json"
+    assert json.loads((run / "summary.json").read_text())["analysis_id"] == "2" * 32
+    assert not os.path.lexists(run / "analysis.zarr.zip")
+    assert victim.read_bytes() == b"precious" and not list(run.glob(".*.link"))
+
+
 def test_a_forced_replacement_exchanges_the_directories_and_keeps_the_old(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
