@@ -121,7 +121,7 @@ def analyse_paths(spec: str, analysis_cfg, verbose: bool = False, console=print,
               file=sys.stderr)
         return BAD_INPUT, []
     if len(stores) == 1:
-        code, row, _ = analyse_one(stores[0], analysis_cfg, verbose, console, name, force, sensor)
+        code, row = analyse_one(stores[0], analysis_cfg, verbose, console, name, force, sensor)
         return code, [row]
     cfg = _one_process_each(analysis_cfg, workers)
     if workers > 1:
@@ -222,15 +222,15 @@ def _analyse_job(store) -> tuple[int, dict, list[tuple[str, str]]]:
     (``("out"|"err", line)``) for the parent to print."""
     cfg, verbose, name, force, sensor = _JOB
     lines: list[tuple[str, str]] = []
-    code, row, _ = analyse_one(store, cfg, verbose, lambda line: lines.append(("out", str(line))), name, force,
+    code, row = analyse_one(store, cfg, verbose, lambda line: lines.append(("out", str(line))), name, force,
                                sensor, err=lambda line: lines.append(("err", line)))
     return code, row, lines
 
 
 def analyse_one(store: Path, analysis_cfg, verbose: bool, console, name, force, sensor,
-                err=None) -> tuple[int, dict, None]:
+                err=None) -> tuple[int, dict]:
     """Analyse one store; never raises but for an interrupt's ``KeyboardInterrupt`` turned into
-    the exit code :data:`INTERRUPTED`. ``(exit code, row, None)``; error lines go to ``err``
+    the exit code :data:`INTERRUPTED`. ``(exit code, row)``; error lines go to ``err``
     (default: stderr)."""
     from .run import analyze_run
     err = err or (lambda line: print(line, file=sys.stderr))
@@ -255,7 +255,7 @@ def analyse_one(store: Path, analysis_cfg, verbose: bool, console, name, force, 
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: stop here; the analysis leaves no partial files
         _quiet_after_interrupt()
         return _interrupted(store, row, err)
-    return code, row, None
+    return code, row
 
 
 def _quiet_after_interrupt() -> None:
@@ -265,10 +265,10 @@ def _quiet_after_interrupt() -> None:
     warnings.filterwarnings("ignore", message=r"coroutine .* was never awaited", category=RuntimeWarning)
 
 
-def _interrupted(store: Path, row: dict, err) -> tuple[int, dict, None]:
+def _interrupted(store: Path, row: dict, err) -> tuple[int, dict]:
     err(f"analysis of {store} interrupted; analyse it again with tactile-analyze run={store}")
     row["result"] = "interrupted"
-    return INTERRUPTED, row, None
+    return INTERRUPTED, row
 
 
 def _report(exc: Exception, what: str, verbose: bool, err=None) -> None:

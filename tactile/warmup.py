@@ -88,6 +88,11 @@ def _on_disk(module: str, kernel: str) -> bool:
         return True
 
 
+_WARM: set = set()
+"""(group, config, sensor, cache directories) found compiled on disk by this process: they stay so for it (asking
+numba's cache index again cost ~7 ms a run of a dataset)."""
+
+
 def cold_groups(config, groups=ANALYSIS, sensor=None) -> list[str]:
     """The ``groups`` of kernels ``config`` needs that numba has not compiled on this machine
     (for ``model``: whose geodesic distances for ``sensor`` — a :class:`tactile.sensor.SensorModel`,
@@ -105,11 +110,6 @@ def cold_groups(config, groups=ANALYSIS, sensor=None) -> list[str]:
             _WARM.add(key)
         return is_cold
     return [g for g in groups if cold(g)]
-
-
-_WARM: set = set()
-"""(group, config, sensor, cache directories) found compiled on disk by this process: they stay so for it (asking
-numba's cache index again cost ~7 ms a run of a dataset)."""
 
 
 def _model_on_disk(config, sensor=None) -> bool:
