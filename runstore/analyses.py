@@ -323,30 +323,30 @@ def _point(run_dir: Path, name: str) -> None:
                 raise
             files.write_text(run_dir, tmp, target + "\n")
             linked = False
+        if linked:      # before the pointer: a process killed between the two leaves no analysis without them
+            _old_paths_follow(run_dir, analyses_dir(run_dir) / name)
         os.replace(tmp, CURRENT, src_dir_fd=fd, dst_dir_fd=fd)
         os.fsync(fd)
     finally:
         os.close(fd)
-    if linked:
-        _old_paths_follow(run_dir)
     for debris in analyses_dir(run_dir).glob(".replaced-*"):
         shutil.rmtree(debris, ignore_errors=True)
 
 
-def _old_paths_follow(run_dir: Path) -> None:
+def _old_paths_follow(run_dir: Path, coming: Path) -> None:
     """``summary.json``, ``analysis.zarr``, ``score.json``, ``figures``, ``analysis.zarr.zip``
     in the run directory as links into ``analysis/`` (made once; a legacy file there is
-    adopted first). Those the current analysis may lack (:data:`OPTIONAL`: a run without
-    ground truth has no score; an analysis has its store in one layout) are linked only when
-    it has them, and such a link of ours is removed when it has not (it would dangle). A link
-    there that is not ours (planted, or pointing out of the run) is replaced by ours — by one
-    rename, never writing through it — or removed where the current analysis lacks the file:
-    these paths always read the current analysis."""
+    adopted first). Those an analysis may lack (:data:`OPTIONAL`: a run without ground truth
+    has no score; an analysis has its store in one layout) are linked only when ``coming``
+    (the analysis made current next, or the current one) has them, and such a link of ours is
+    removed when it has not (it would dangle). A link there that is not ours (planted, or
+    pointing out of the run) is replaced by ours — by one rename, never writing through it —
+    or removed where ``coming`` lacks the file: these paths always read the current analysis."""
     fd = os.open(run_dir, os.O_RDONLY | os.O_DIRECTORY)
     try:
         for name in FOLLOW:
             ours = f"{CURRENT}/{name}"
-            has = name not in OPTIONAL or os.path.lexists(run_dir / CURRENT / name)
+            has = name not in OPTIONAL or os.path.lexists(coming / name)
             if os.path.lexists(run_dir / name):
                 if os.path.islink(run_dir / name) and not has:
                     os.unlink(name, dir_fd=fd)
@@ -471,7 +471,7 @@ def adopt_legacy(run_dir) -> str | None:
                 os.rename(src, trash / o)
         shutil.rmtree(trash, ignore_errors=True)
         if _pointer(run_dir) is not None:
-            _old_paths_follow(run_dir)
+            _old_paths_follow(run_dir, run_dir / CURRENT)
     return name
 
 

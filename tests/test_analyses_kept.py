@@ -100,6 +100,26 @@ def test_links_planted_where_the_current_analysis_is_read_are_replaced_never_wri
     assert victim.read_bytes() == b"precious" and not list(run.glob(".*.link"))
 
 
+def test_a_process_killed_just_after_pointing_at_its_analysis_leaves_the_paths_that_read_it(tmp_path, monkeypatch):
+    """The run's first analysis, its process ended right after the rename that makes it
+    current (a worker killed by a Ctrl-C of the whole dataset's analysis): wherever
+    ``RUN/analysis`` is, ``RUN/summary.json`` reads it (found missing on CI before)."""
+    run = tmp_path / "run"
+    run.mkdir()
+    replace = os.replace
+
+    def killed_after_pointing(src, dst, **kw):
+        replace(src, dst, **kw)
+        if dst == analyses.CURRENT:
+            raise KeyboardInterrupt
+    monkeypatch.setattr(os, "replace", killed_after_pointing)
+    with pytest.raises(KeyboardInterrupt):
+        make(run, "farneback-aaa", "1" * 32)
+    assert os.readlink(run / "analysis") == "analyses/farneback-aaa"
+    assert json.loads((run / "summary.json").read_text())["analysis_id"] == "1" * 32
+    assert (run / "figures" / "pressure.png").exists() and (run / "score.json").exists()
+
+
 def test_a_forced_replacement_exchanges_the_directories_and_keeps_the_old(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
