@@ -1,6 +1,6 @@
 """The simulated BioTac SP's electrode changes against the real contact frames the project ships.
 
-    python benchmarks/bench_sim_vs_real.py [--out DIR] [--seed 0]
+    python benchmarks/bench_sim_vs_real.py [--out DIR] [--seed 0] [--shear-scales 1,0.5,0.25]
 
 Deterministic (numpy only, seeded; ~20 s of CPU). Prints JSON lines and two markdown tables,
 and writes ``DIR/sim_vs_real.png`` (default ``DIR`` = ``benchmarks/out``):
@@ -24,6 +24,10 @@ and writes ``DIR/sim_vs_real.png`` (default ``DIR`` = ``benchmarks/out``):
    the end (the last 100 ms), as the summed |change| over the 24 electrodes, the largest
    |change|, the electrodes whose |change| passes the threshold, and the ratio of the summed
    |change| to the press's summed drop; the shift of the pattern's centre (mm).
+
+4. **The shear's size**: a pull at 0° again with ``hardware.sensor.shear_kohm_per_n`` scaled
+   by each of ``--shear-scales`` (a configuration override; the simulator is not changed): the
+   pulled state measured as the real frames, to show which size keeps it inside them.
 
 No real recording of a known tangential force or torque exists here, so 3 has no real
 counterpart: it says how large the simulator makes a pull and a twist, to be read with the
@@ -175,17 +179,20 @@ def mechanics(seen: dict, contact) -> dict:
             "traction_max_n": round(seen["traction_n"], 3), "torque_max_n_mm": round(seen["torque_n_mm"], 2)}
 
 
-def simulate(force_n: float, kind: str, amount: float, seed: int = 0, threshold: float | None = None) -> dict:
+def simulate(force_n: float, kind: str, amount: float, seed: int = 0, threshold: float | None = None,
+             sensor: dict | None = None) -> dict:
     """Press ff on the flat board at ``force_n`` (0.5 s hold), then a stage motion ``kind``
     (``translate`` by :data:`PULL_MM` towards ``amount`` deg in the base frame, ``rotate`` by
     ``amount`` deg, ``none``: a touch as long as the pull) and :data:`AFTER_S` of hold. Returns
-    the press's measures (median over the hold's frames) and the motion's change measures."""
+    the press's measures (median over the hold's frames) and the motion's change measures.
+    ``sensor``: overrides of ``hardware.sensor`` keys (e.g. ``{"shear_kohm_per_n": 6.0}``)."""
     from tactile_flow.hardware.sim import make_sim_lab, skin
     from tactile_flow.hardware.sim.scenarios import biotac_arrays, press, record
 
     taxels = _taxels()
     threshold = json.loads(CALIBRATION.read_text())["threshold_counts"] if threshold is None else threshold
-    lab = make_sim_lab({"seed": seed, "fingers": ["ff"]}, {"kind": "flat"})
+    cfg = {"seed": seed, "fingers": ["ff"]} | ({"sensor": sensor} if sensor else {})
+    lab = make_sim_lab(cfg, {"kind": "flat"})
     with lab, _watching_skin(skin) as seen:
         held = biotac_arrays(press(lab, force_n, hold_s=0.5)["biotac"])["electrodes"][:, 0].astype(float)
         rest = lab.biotac.sensor.rest_counts(lab.world.time)[0]
@@ -288,6 +295,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out", help="where the PNG goes")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--shear-scales", default="1,0.5,0.25",
+                    help="also pull (0°) with hardware.sensor.shear_kohm_per_n × each of these (comma-separated)")
     args = ap.parse_args(argv)
     real = real_contacts()
     print(json.dumps({"real_contacts": int(len(real["level"])),
@@ -336,6 +345,20 @@ def main(argv=None) -> int:
         print(f"| {level} ({sims[(level, 'translate', 0.0)]['force_n']:.2f} N) | {m['radius_mm']} | {m['k_t_n_mm']} | "
               f"{m['k_r_n_mm_rad']} | {m['traction_capacity_n']} | {m['torque_capacity_n_mm']} | "
               f"{m['stretch_at_slip_mm']} | {m['twist_at_slip_deg']} |")
+    scales = [float(x) for x in args.shear_scales.split(",") if x.strip()]
+    if scales:
+        from tactile_flow.hardware.config import SensorModelConfig
+        base = SensorModelConfig().shear_kohm_per_n
+        print("\n| shear_kohm_per_n | level | peak Σ|Δ| / press Σ drop | after the pull, as the real frames: " +
+              " | ".join(f"{LABELS[k]} (real %ile)" for k in MEASURES) + " |")
+        print("| --- | --- | --- |" + " --- |" * len(MEASURES))
+        for sc in scales:
+            for level, force in PRESS_FORCES.items():
+                r = simulate(force, "translate", 0.0, seed=args.seed, sensor={"shear_kohm_per_n": base * sc})
+                print(json.dumps({"shear_scale": sc, "sim": level, "change": r["change"], "after": r["after"]}))
+                a = r["after"]
+                print(f"| {base * sc:g} (×{sc:g}) | {level} | {r['change']['peak_sum_over_press_sum']:.2f} | " + " | ".join(
+                    f"{a[k]:.3g} ({percentile_of(real[k], a[k]):.0f})" for k in MEASURES) + " |")
     png = args.out / "sim_vs_real.png"
     figure(real, sims, png)
     print(json.dumps({"figure": str(png)}))

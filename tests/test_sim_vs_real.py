@@ -97,11 +97,11 @@ def test_pull_and_twist_against_the_press(sims):
     assert sims[("firm", "translate")]["change"]["peak_n_beyond"] >= 20
 
 
-def test_a_firm_pull_leaves_a_pattern_larger_than_any_real_contact(real, sims):
+def test_a_firm_pull_leaves_a_pattern_larger_than_the_real_contacts(real, sims):
     """The departure the docs report: measured as the real frames, a firm pull's summed drop is
-    beyond every real contact's and its largest drop's share below nearly all of them."""
+    beyond 99 % of the real contacts' and its largest drop's share below 90 % of them."""
     after = sims[("firm", "translate")]["after"]
-    assert after["sum_drop_counts"] > np.nanmax(real["sum_drop_counts"])
+    assert after["sum_drop_counts"] > np.nanpercentile(real["sum_drop_counts"], 99)
     assert bench.percentile_of(real["top_share"], after["top_share"]) < 10
 
 
