@@ -2,8 +2,9 @@
 
     python benchmarks/bench_sim_vs_real.py [--out DIR] [--seed 0] [--shear-scales 1,0.5,0.25]
 
-Deterministic (numpy only, seeded; ~20 s of CPU). Prints JSON lines and two markdown tables,
-and writes ``DIR/sim_vs_real.png`` (default ``DIR`` = ``benchmarks/out``):
+Deterministic (numpy only, seeded; ~15 s of CPU). Prints JSON lines and markdown tables,
+and writes ``DIR/sim_vs_real.png`` (default ``DIR`` = ``docs/figures``, the figure
+docs/simulator.md shows):
 
 1. **The press**: every real finger contact of ``tests/data/biotac_sp_grasps`` (3698 rows of
    ff, mf, th; 10 859 finger contacts) measured as :mod:`hardware.sim.calibrate_contact` measures
@@ -25,7 +26,7 @@ and writes ``DIR/sim_vs_real.png`` (default ``DIR`` = ``benchmarks/out``):
    |change|, the electrodes whose |change| passes the threshold, and the ratio of the summed
    |change| to the press's summed drop; the shift of the pattern's centre (mm).
 
-4. **The shear's size**: a pull at 0° again with ``hardware.sensor.shear_kohm_per_n`` scaled
+4. **The shear's size**: a pull at 0° and a twist of +30° again with ``hardware.sensor.shear_kohm_per_n`` scaled
    by each of ``--shear-scales`` (a configuration override; the simulator is not changed): the
    pulled state measured as the real frames, to show which size keeps it inside them.
 
@@ -281,7 +282,7 @@ def figure(real: dict, sims: dict, path: Path) -> None:
         v = [sims[(level, kind, amount)]["change"]["peak_sum_over_press_sum"] for kind, amount in MOTIONS]
         ax.bar(xs + (j - 0.5) * 0.4, v, 0.4, color=colours[level], label=f"sim {PRESS_FORCES[level]} N")
     ax.set_xticks(xs, names, rotation=45, fontsize=8)
-    ax.set_ylabel("peak Σ|change| / press Σ drop")
+    ax.set_ylabel("peak Σ abs change / press Σ drop")
     ax.set_title("pull / twist / touch vs the press (simulated only)", fontsize=9)
     ax.legend(fontsize=7)
     fig.suptitle("BioTac SP electrode changes: real grasp frames (tests/data) vs the simulator")
@@ -293,7 +294,8 @@ def figure(real: dict, sims: dict, path: Path) -> None:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "out", help="where the PNG goes")
+    ap.add_argument("--out", type=Path, default=ROOT / "docs" / "figures",
+                    help="where sim_vs_real.png goes (default: docs/figures, the figure docs/simulator.md shows)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--shear-scales", default="1,0.5,0.25",
                     help="also pull (0°) with hardware.sensor.shear_kohm_per_n × each of these (comma-separated)")
@@ -320,8 +322,8 @@ def main(argv=None) -> int:
         q = r["real"]
         print(f"| {LABELS[r['measure']]} | {r['level']} ({r['force_n']} N) | " +
               " | ".join(f"{q[f'q{p}']:.3g}" for p in QUANTILES) + f" | {r['sim']:.3g} | {r['sim_percentile']:.0f} |")
-    print("\n| motion | level | peak Σ|Δ| (counts) | peak max|Δ| | peak electrodes > threshold | "
-          "end Σ|Δ| | end max|Δ| | peak Σ|Δ| / press Σ drop | end / press | centre shift (mm) |")
+    print("\n| motion | level | peak Σ abs Δ (counts) | peak max abs Δ | peak electrodes > threshold | "
+          "end Σ abs Δ | end max abs Δ | peak Σ abs Δ / press Σ drop | end / press | centre shift (mm) |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for (level, kind, amount), r in sims.items():
         c = r["change"]
@@ -349,16 +351,19 @@ def main(argv=None) -> int:
     if scales:
         from tactile_flow.hardware.config import SensorModelConfig
         base = SensorModelConfig().shear_kohm_per_n
-        print("\n| shear_kohm_per_n | level | peak Σ|Δ| / press Σ drop | after the pull, as the real frames: " +
-              " | ".join(f"{LABELS[k]} (real %ile)" for k in MEASURES) + " |")
-        print("| --- | --- | --- |" + " --- |" * len(MEASURES))
+        print("\n| shear_kohm_per_n | motion | level | peak Σ abs Δ / press Σ drop | peak electrodes > threshold | "
+              "after it, as the real frames: " + " | ".join(f"{LABELS[k]} (real %ile)" for k in MEASURES) + " |")
+        print("| --- | --- | --- | --- | --- |" + " --- |" * len(MEASURES))
         for sc in scales:
-            for level, force in PRESS_FORCES.items():
-                r = simulate(force, "translate", 0.0, seed=args.seed, sensor={"shear_kohm_per_n": base * sc})
-                print(json.dumps({"shear_scale": sc, "sim": level, "change": r["change"], "after": r["after"]}))
-                a = r["after"]
-                print(f"| {base * sc:g} (×{sc:g}) | {level} | {r['change']['peak_sum_over_press_sum']:.2f} | " + " | ".join(
-                    f"{a[k]:.3g} ({percentile_of(real[k], a[k]):.0f})" for k in MEASURES) + " |")
+            for kind, amount in (("translate", 0.0), ("rotate", 30.0)):
+                for level, force in PRESS_FORCES.items():
+                    r = simulate(force, kind, amount, seed=args.seed, sensor={"shear_kohm_per_n": base * sc})
+                    print(json.dumps({"shear_scale": sc, "sim": level, "kind": kind, "amount": amount,
+                                      "change": r["change"], "after": r["after"]}))
+                    a, c = r["after"], r["change"]
+                    print(f"| {base * sc:g} (×{sc:g}) | {'pull' if kind == 'translate' else 'twist'} {amount:+g}° | "
+                          f"{level} | {c['peak_sum_over_press_sum']:.2f} | {c['peak_n_beyond']} | " + " | ".join(
+                              f"{a[k]:.3g} ({percentile_of(real[k], a[k]):.0f})" for k in MEASURES) + " |")
     png = args.out / "sim_vs_real.png"
     figure(real, sims, png)
     print(json.dumps({"figure": str(png)}))
