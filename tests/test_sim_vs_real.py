@@ -5,8 +5,9 @@ literature reports").
 The real per-contact distributions come from tests/data/biotac_sp_grasps measured as the
 shipped contact calibration measures them; a simulated press at the light and firm forces must
 sit inside the real light / firm distribution on every measure the simulator is tuned to
-(between the real 5th and 95th percentiles, near the middle for the magnitudes), and the
-documented departures (the spread of the pattern, a pull's size) must stay what the docs say.
+(near the middle of it), the pattern's spread (a documented departure) inside its lower part;
+the pull's and the twist's sizes are the docs' table, and that a pulled contact looks like a real
+one is a strict xfail: the known departure, reported for a simulator change.
 """
 
 import importlib.util
@@ -82,7 +83,8 @@ def test_the_resting_recording_stays_below_the_threshold():
 
 
 def test_pull_and_twist_against_the_press(sims):
-    """What the docs' table says of a pull and a twist: a 4 mm pull changes the electrodes by
+    """What the docs' table says of a pull and a twist (a change of the shear's gain changes these
+    figures: rerun the benchmark and update both): a 4 mm pull changes the electrodes by
     more than the press itself (2-3x at 5 N, 4-6x at 1.3 N: the shear loads' size, not
     calibrated on real data); a 30 degree twist far less than a pull (0.2-0.7 of the press), and
     at 1.3 N by no electrode beyond the contact threshold; a touch stays near the noise."""
@@ -97,12 +99,16 @@ def test_pull_and_twist_against_the_press(sims):
     assert sims[("firm", "translate")]["change"]["peak_n_beyond"] >= 20
 
 
-def test_a_firm_pull_leaves_a_pattern_larger_than_the_real_contacts(real, sims):
-    """The departure the docs report: measured as the real frames, a firm pull's summed drop is
-    beyond 99 % of the real contacts' and its largest drop's share below 90 % of them."""
+@pytest.mark.xfail(strict=True, reason="known departure (docs/simulator.md): the shear's electrode gain is about "
+                   "4x too large for a pulled contact to look like a real one; reported, not changed here")
+def test_a_pulled_contact_looks_like_a_real_contact(real, sims):
+    """Measured as the real frames, the state a 5 N pull leaves must be a contact the real frames
+    contain: its summed drop within their 99th percentile, its largest drop's share above their
+    5th. Today it is not (12 400-16 600 counts against 10 870; share at the 0-5th percentile):
+    strict xfail, so the fix of the shear's gain turns this into a failure until the mark goes."""
     after = sims[("firm", "translate")]["after"]
-    assert after["sum_drop_counts"] > np.nanpercentile(real["sum_drop_counts"], 99)
-    assert bench.percentile_of(real["top_share"], after["top_share"]) < 10
+    assert after["sum_drop_counts"] <= np.nanpercentile(real["sum_drop_counts"], 99)
+    assert bench.percentile_of(real["top_share"], after["top_share"]) >= 5
 
 
 def test_the_skin_mechanics_grow_with_the_force(sims):
