@@ -75,8 +75,8 @@ def _taxels() -> np.ndarray:
 
 
 def real_contacts(directory=GRASPS) -> dict[str, np.ndarray]:
-    """Per finger contact of the real grasp frames: each of :data:`MEASURES` (arrays), ``finger``
-    and ``level`` (0 light, 1 mid, 2 firm: terciles of the summed drop), with the baselines and
+    """Per finger contact of the real grasp frames: each of :data:`MEASURES` (arrays), ``finger``,
+    ``slipped`` (the row's label: the object slipped when lifted) and ``level`` (0 light, 1 mid, 2 firm: terciles of the summed drop), with the baselines and
     the threshold the shipped calibration derives (same seed, same order, same median of
     5 × rest noise ⊕ baseline uncertainty), and only rows where an electrode moved."""
     from tactile_flow.hardware.sim.calibrate_contact import K_NOISE, TEMPLATE
@@ -88,23 +88,33 @@ def real_contacts(directory=GRASPS) -> dict[str, np.ndarray]:
     sensors = []
     for path in sorted(Path(directory).glob("*.csv")):
         _, e = read_grasps(path)
+        slipped = _slipped(path)
         for i, f in enumerate(FINGERS):
             u = unloaded_state(e[:, i], rng)
             sigma = np.asarray(rest[TEMPLATE[f]]["electrode_noise_std"], float)
-            sensors.append((f, u, local_pattern(e[:, i], u["baseline"], taxels), K_NOISE * np.hypot(sigma, u["uncertainty"])))
+            sensors.append((f, u, local_pattern(e[:, i], u["baseline"], taxels), K_NOISE * np.hypot(sigma, u["uncertainty"]),
+                            slipped))
     threshold = float(np.median([s[3] for s in sensors]))
     out: dict[str, list] = {}
-    for f, u, lp, _ in sensors:
+    for f, u, lp, _, slipped in sensors:
         s = contact_stats(lp["local"], u["baseline"] + lp["far"][:, None], threshold, taxels)
         keep = s["n_beyond"] > 0
         for k in MEASURES:
             out.setdefault(k, []).append(s[k][keep])
         out.setdefault("finger", []).append(np.full(int(keep.sum()), f))
+        out.setdefault("slipped", []).append(slipped[keep])
     res = {k: np.concatenate(v) for k, v in out.items()}
     cuts = np.percentile(res["sum_drop_counts"], [100 / 3, 200 / 3])
     res["level"] = np.digitize(res["sum_drop_counts"], cuts)
     res["threshold_counts"] = threshold
     return res
+
+
+def _slipped(path) -> np.ndarray:
+    """The ``slipped`` column of a grasp CSV (1: the object slipped when lifted), as int (N,)."""
+    import csv
+    with open(path, newline="") as fh:
+        return np.array([int(float(r["slipped"])) for r in csv.DictReader(fh)])
 
 
 def resting_floor(threshold: float | None = None) -> dict:
@@ -305,6 +315,9 @@ def main(argv=None) -> int:
                       "per_level": {lv: int((real["level"] == i).sum()) for i, lv in enumerate(LEVELS)}}), flush=True)
     print(json.dumps({"real_all_contacts": {k: {f"q{q}": round(float(np.nanpercentile(real[k], q)), 3) for q in (1, 50, 99)}
                                             | {"max": round(float(np.nanmax(real[k])), 3)} for k in MEASURES}}), flush=True)
+    print(json.dumps({"real_by_label": {lab: {k: round(float(np.nanmedian(real[k][real["slipped"] == v])), 3)
+                                              for k in MEASURES} | {"contacts": int((real["slipped"] == v).sum())}
+                                        for lab, v in (("stable", 0), ("slipped", 1))}}), flush=True)
     rest = resting_floor()
     print(json.dumps({"resting_recording": rest}), flush=True)
     sims = {}
