@@ -86,7 +86,7 @@ class Group:
 
     def __init__(self, path: str, nodes: dict[str, dict], members: dict[str, bytes]):
         self._path, self._nodes, self._members = path, nodes, members
-        self.attrs = dict((nodes[path] if path else nodes[""]).get("attributes") or {})
+        self.attrs = dict(nodes[path].get("attributes") or {})
 
     def _children(self):
         prefix = f"{self._path}/" if self._path else ""
