@@ -129,6 +129,7 @@ TESTED: dict[str, object] = {
     'python benchmarks/bench_recorder.py --sim-s 20 --repeat 2': BENCH,
     'python benchmarks/bench_recorder.py --sim-s 20 --repeat 3': BENCH,
     'python benchmarks/bench_sim.py': BENCH,
+    'python benchmarks/bench_sim_vs_real.py': BENCH,
     'python benchmarks/bench_slip.py': BENCH,
     'python benchmarks/bench_reflex.py': BENCH,
     'python benchmarks/bench_slip_direction.py': BENCH,
