@@ -63,22 +63,23 @@ def angle_error(a, b) -> float:
     return abs((a - b + 180.0) % 360.0 - 180.0)
 
 
-def runs(out: Path, grid: str, noise: float, quick: bool, sensor: str = "biotac_sp", seed: int = 0):
+def runs(out: Path, grid: str, noise: float, quick: bool, sensor: str = "biotac_sp", seed: int = 0,
+         overrides: tuple[str, ...] = ()):
     """Yield (condition, store) for every run of the grid at ``noise`` with the fingertips of the
     sensor model ``sensor`` and the simulator's ``seed``, running the missing ones (the BioTac
     SP's in ``out/<grid>``, as before; another model's in ``out/<sensor>/<grid>``; a seed other
-    than 0 in ``…/<grid>/seed<seed>``)."""
+    than 0 in ``…/<grid>/seed<seed>``; runs with Hydra ``overrides`` in ``…/<grid>/set-<them>``)."""
     from tactile_flow.protocols.slip_grid import conditions, run_slip_in_place, varied_conditions
     conds = varied_conditions() if grid == "varied" else conditions()
     if quick:
         conds = conds[::4]
     for c in conds:
         d = (out if sensor == "biotac_sp" else out / sensor) / grid / (f"seed{seed}" if seed else "") \
-            / f"noise{noise:g}" / c.name
+            / ("set-" + ",".join(overrides).replace("/", "_") if overrides else "") / f"noise{noise:g}" / c.name
         if not (d / "run.zarr").exists():
             shutil.rmtree(d, ignore_errors=True)
             try:
-                r = run_slip_in_place(d, c, noise=noise, seed=seed, overrides=[f"sensor={sensor}"])
+                r = run_slip_in_place(d, c, noise=noise, seed=seed, overrides=[f"sensor={sensor}", *overrides])
             except Exception as exc:  # noqa: BLE001 - a condition the plan check refuses: said, skipped
                 print(json.dumps({"run": c.name, "status": "refused", "error": str(exc)}), file=sys.stderr)
                 continue
@@ -277,6 +278,8 @@ def main(argv=None) -> None:
     ap.add_argument("--real-touch", type=int, default=6, help="real contact frames per finger and grasp file (0: none)")
     ap.add_argument("--quick", action="store_true", help="every fourth condition")
     ap.add_argument("--seeds", type=int, default=1, help="run each condition with the simulator's seeds 0 … N−1")
+    ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
+                    help="Hydra overrides of every run, e.g. hardware.sensor.shear_kohm_per_n=3 (runs kept apart)")
     ap.add_argument("--sensor", nargs="+", default=["biotac_sp", "biotac"],
                     help="sensor models (conf/sensor/): the BioTac SP and the classic BioTac by default")
     args = ap.parse_args(argv)
@@ -296,7 +299,7 @@ def bench(args, sensor: str) -> None:
     t0 = time.perf_counter()
     everything = []
     for noise, seed in [(n, s) for n in args.noise for s in range(args.seeds)]:
-        for c, store in runs(args.out, args.grid, noise, args.quick, sensor, seed):
+        for c, store in runs(args.out, args.grid, noise, args.quick, sensor, seed, tuple(args.set)):
             tr, est = evaluate(store, model, cfg)
             everything.append((noise, c, tr, est))
             rot = ((est or {}).get("evidence") or {}).get("rotation") or {}

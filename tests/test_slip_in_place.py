@@ -94,6 +94,29 @@ def test_the_skin_sticks_then_slips_at_the_kinetic_level():
     assert s.traction_n == 0 and s.twist == 0
 
 
+def test_a_growing_contact_keeps_its_traction_not_its_stretch():
+    """Mindlin–Deresiewicz: skin joining a contact as the press grows it is unstressed, so a
+    stretch taken at touchdown (the holder's tremor) keeps its traction, not its length, while
+    the contact widens: 0.02 mm at a = 0.5 mm is 0.0025 mm at 4 mm (k_t ∝ a), the twist falls
+    by (0.5/4)³. A contact that narrows and widens again to a radius it had keeps its stretch
+    (no ratchet under the tremor's force wobble); lifted off, it starts again."""
+    s = skin.Skin()
+    assert not skin.step(s, [0.02, 0.0], 1e-3, 0.05, 0.5, 0.8, 0.6, 0.08)
+    q, m = s.traction_n, s.torque_n_mm
+    assert s.stretch[0] == pytest.approx(0.02) and s.widest_mm == 0.5
+    assert not skin.step(s, [0.0, 0.0], 0.0, 1.3, 4.0, 0.8, 0.6, 0.08)
+    assert s.stretch[0] == pytest.approx(0.02 * 0.5 / 4.0)
+    # kept to the initial stiffness (the touchdown's stretch was a tenth of the way to gross slip)
+    assert s.traction_n == pytest.approx(q, rel=0.05) and s.twist == pytest.approx(1e-3 * (0.5 / 4.0) ** 3)
+    assert s.torque_n_mm == pytest.approx(m, rel=0.05)
+    before = s.stretch.copy()
+    for a in (3.9, 4.0, 3.95, 4.0):
+        skin.step(s, [0.0, 0.0], 0.0, 1.3, a, 0.8, 0.6, 0.08)
+    assert np.allclose(s.stretch, before)
+    s.relax()
+    assert s.widest_mm == 0.0
+
+
 def test_a_twist_loads_opposite_quadrants_of_an_elongated_patch():
     x, y = np.meshgrid(np.linspace(-5, 5, 21), np.linspace(-2, 2, 9))
     pts = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], -1)
@@ -380,3 +403,24 @@ def test_a_light_twist_that_drifts_back_is_read_as_a_twist(tmp_path):
     assert abs(rot["rotation_deg"]) < 0.9 and rot["read_as"] == "peak", rot   # the end values alone miss it
     assert slip["slip_class"] == "rotation" and slip["rotation_deg"] > 0.9, rot
     assert slip["slip_onset_s"] is not None
+
+
+@pytest.mark.slow
+def test_a_light_pull_on_the_cylinder_under_the_holders_tremor_reads_as_a_pull(tmp_path):
+    """Seed 1's light pull at 180° on the cylinder with a tare: the holder's tremor at touchdown
+    had left the skin stretched by ~0.02 mm at the full press's stiffness, whose shear loads
+    widened the pattern (RMS radius 3.9 mm against 3.2 under seed 0) and turned the pull's
+    rendered pattern by 4°: read as a twist. With the traction kept as the contact grows
+    (``hardware.sim.skin.grown``) it is a pull, in its direction."""
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.load import load_run, open_truth
+    from tactile_flow.analysis.pipeline import analyse
+    from tactile_flow.analysis.score import score
+    c = Condition("translate", direction_deg=180.0, press_force=1.3, surface="cylinder", tare=True)
+    r = run_slip_in_place(tmp_path / "run", c, seed=1)
+    assert r.status == "success", r.error
+    a = analyse(load_run(r.store), load_config({"figures": False, "progress": False}))
+    slip = a.slips[score(a, open_truth(r.store))["object_motions"][0]["segment"]]
+    assert slip["evidence"]["motion"]["radius_mm"] < 3.8, slip["evidence"]["motion"]
+    assert slip["slip_class"] == "translation", slip["evidence"]["rotation"]
+    assert abs((slip["slip_direction_sensor_deg"] - 180.0 + 180.0) % 360.0 - 180.0) <= 45.0

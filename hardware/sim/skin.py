@@ -20,6 +20,13 @@ describe the fingertip's and the BioTac's silicone skin alike at the scale of a 
   André et al., J. R. Soc. Interface 2011; Delhaye, Lefèvre & Thonnard, J. R. Soc. Interface
   11:20140698, 2014), and a tangential torque about the normal lowers the load at which it
   slips in proportion (Kinoshita et al., J. Neurophysiol. 78:1619, 1997);
+- **a growing contact** (Mindlin & Deresiewicz, J. Appl. Mech. 20:327, 1953; Johnson §7.4):
+  skin that comes into contact as the normal load grows joins it unstressed, so the traction
+  (and the torque) the contact already carries stays what it was while its stiffness grows —
+  the stretch it corresponds to shrinks by ``k_t(a_before)/k_t(a)`` (the twist by
+  ``k_r(a_before)/k_r(a)``). Applied where the contact reaches a radius it never had before
+  (``widest_mm``): a light press's tremor-sized stretch at touchdown (the holder's tremor,
+  ``hardware.stage.tremor_mm``) is not carried, at full stiffness, into the press;
 - after gross slip the traction falls to the kinetic level (``μk`` instead of ``μs``): the
   stretch relaxes to where ``Q = μk·F``; with ``stick_slip`` the skin sticks again at once
   and the next pull repeats the cycle (the stick-slip of a pulled object), else it rides at
@@ -55,11 +62,12 @@ class Skin:
     torque_n_mm: float = 0.0                                            # M(|twist|): partial-slip torque, N·mm
     slipping: bool = False                                              # slid in the last step
     twisting: bool = False                                              # turned against friction in the last step
+    widest_mm: float = 0.0                                              # the contact's largest radius so far, mm
 
     def relax(self) -> None:
         """Out of contact: the skin springs back."""
         self.stretch = np.zeros(2)
-        self.twist = self.traction_n = self.torque_n_mm = 0.0
+        self.twist = self.traction_n = self.torque_n_mm = self.widest_mm = 0.0
         self.slipping = self.twisting = False
 
 
@@ -97,6 +105,7 @@ def step(skin: Skin, move_mm, turn_rad: float, force_n: float, radius_mm: float,
         skin.relax()
         return False
     kt, kr = stiffness(radius_mm, shear_modulus)
+    grown(skin, radius_mm, shear_modulus)
     cap_s, cap_k = mu_s * force_n, mu_k * force_n
     move = np.asarray(move_mm, float)
     riding = not stick_slip and skin.slipping and float(np.hypot(*move)) > 0
@@ -116,6 +125,22 @@ def step(skin: Skin, move_mm, turn_rad: float, force_n: float, radius_mm: float,
     skin.twist = w
     skin.torque_n_mm = partial_slip_load(w, mu_s * cap, kr)
     return skin.slipping or skin.twisting
+
+
+def grown(skin: Skin, radius_mm: float, shear_modulus: float) -> None:
+    """Where the contact reaches a radius it never had (``skin.widest_mm``), the skin that joins
+    it is unstressed: the traction and the torque the contact carries are kept, so the stretch
+    shrinks by ``k_t(before)/k_t(now)`` and the twist by ``k_r(before)/k_r(now)`` (in place;
+    module docstring; exact at the initial stiffness, the traction of a stretch already part of the
+    way to gross slip grows a little). A first contact (no radius yet) only records its radius."""
+    if radius_mm <= skin.widest_mm:
+        return
+    if skin.widest_mm > 0:
+        kt0, kr0 = stiffness(skin.widest_mm, shear_modulus)
+        kt, kr = stiffness(radius_mm, shear_modulus)
+        skin.stretch = skin.stretch * (kt0 / kt)
+        skin.twist *= kr0 / kr
+    skin.widest_mm = float(radius_mm)
 
 
 def displaced(points, centre, skin: Skin) -> np.ndarray:
