@@ -11,6 +11,8 @@ module                 holds
 :mod:`.reader`         :func:`open_run` (xarray), :func:`open_group` (zarr) and the
                        schema-version check: the one opener of every store, either layout
 :mod:`.packed`         the packed layout of a finished store: one zip (``run.zarr.zip``)
+:mod:`.inmemory`       a run store made in memory and written packed at once (an import)
+:mod:`.packedread`     a short packed store read whole without zarr (the analysis's loader)
 :mod:`.labelled`       labelled arrays written as xarray writes them, without xarray
                        (``analysis.zarr``)
 :mod:`.recover`        ``tactile-recover``: close a store its writer never closed

@@ -114,6 +114,20 @@ class GrowingArray:
         atomic_write(self.directory / "zarr.json", self._template.fill([rows]))
         self.meta, self.rows = {**self.meta, "shape": [rows, *self.row_shape]}, rows
 
+    def advance(self, p: Pending) -> None:
+        """Take ``p`` as written elsewhere (in memory: :class:`.inmemory.MemoryRunStore`): its
+        rows (the ``zarr.json`` it would write) and the partial last chunk."""
+        self.meta, self.rows = {**self.meta, "shape": [p.rows, *self.row_shape]}, p.rows
+        self._tail = p.tail
+
+    def key(self, i: int) -> str:
+        """The chunk key of the ``i``-th chunk along the first axis (``c/i/0/0``)."""
+        return self._key(i)
+
+    def decode(self, data: bytes) -> bytes:
+        """A numeric chunk's raw bytes from its file content."""
+        return bytes(self._zstd.decode(data)) if self._zstd is not None else data
+
     def forget_tail(self) -> None:
         """The last chunk was rewritten by other means (zarr): read it back at the next append."""
         self._tail = None

@@ -109,18 +109,9 @@ class RunStore:
         path = Path(path)
         if path.exists():
             raise FileExistsError(f"run store {path} already exists")
-        fingers = tuple(fingers)
-        if sensor is None and streams is None:
-            from tactile_flow.tactile.sensor import builtin_sensor
-            sensor = builtin_sensor()
-        streams = lab_streams(fingers, stage, sensor) if streams is None else dict(streams)
-        schema = run_schema(chunk_s, live=bool(live), streams=streams)
-        prov = provenance or {}
-        recorded = {} if sensor is None else {"sensor": sensor.summary(), "sensor_model": sensor.spec}
-        root_attrs = jsonable(dict(run_id=run_id or prov.get("run_id") or str(uuid.uuid4()), protocol=protocol,
-                                   status=RunStatus.RUNNING, start_time=prov.get("start_time") or utc_now(), end_time=None,
-                                   schema_version=SCHEMA_VERSION, fingers=list(fingers), provenance=prov,
-                                   **recorded, **(attrs or {})))
+        fingers, streams, schema, root_attrs = plan(protocol=protocol, fingers=fingers, run_id=run_id,
+                                                    provenance=provenance, attrs=attrs, chunk_s=chunk_s, live=live,
+                                                    stage=stage, streams=streams, sensor=sensor)
         room = None
         if room_bytes:
             try:
@@ -333,6 +324,26 @@ class RunStore:
             self.set_attrs(status=status, end_time=utc_now(), **attrs)
             self.commit()
             self.closed = True
+
+
+def plan(*, protocol: str, fingers=FINGERS, run_id: str | None = None, provenance: dict | None = None,
+         attrs: dict | None = None, chunk_s: float = 5.0, live: tuple | None = None, stage: bool = False,
+         streams: dict | None = None, sensor=None) -> tuple[tuple, dict, dict[str, Block], dict]:
+    """What :meth:`RunStore.create` makes a store of (its arguments, the same defaults):
+    ``(fingers, streams, schema, root attributes)``, the status ``running``."""
+    fingers = tuple(fingers)
+    if sensor is None and streams is None:
+        from tactile_flow.tactile.sensor import builtin_sensor
+        sensor = builtin_sensor()
+    streams = lab_streams(fingers, stage, sensor) if streams is None else dict(streams)
+    schema = run_schema(chunk_s, live=bool(live), streams=streams)
+    prov = provenance or {}
+    recorded = {} if sensor is None else {"sensor": sensor.summary(), "sensor_model": sensor.spec}
+    root_attrs = jsonable(dict(run_id=run_id or prov.get("run_id") or str(uuid.uuid4()), protocol=protocol,
+                               status=RunStatus.RUNNING, start_time=prov.get("start_time") or utc_now(), end_time=None,
+                               schema_version=SCHEMA_VERSION, fingers=list(fingers), provenance=prov,
+                               **recorded, **(attrs or {})))
+    return fingers, streams, schema, root_attrs
 
 
 def _make_tree(path: Path, schema: dict[str, Block], coords: dict, attrs: dict) -> None:
