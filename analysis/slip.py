@@ -180,7 +180,8 @@ LOADED = 0.95
 over the time after settling (``analysis.slip.reference_horizon_s``). At 0.8 the press's last
 fifth, after the reference, changed a real contact frame's shape enough for the static flow to
 read a turn of up to 0.95° (0.44° at the 95th percentile: ``tests/real_touch.py``'s 90 records
-reached from rest); at 0.95 at most 0.35° (0.17°) — under ``min_still_rotation_deg``."""
+reached from rest); at 0.95 at most 0.23–0.35° over two draws of the resting noise — under
+``min_still_rotation_deg``."""
 
 
 def _loaded_end(load, fraction: float) -> int:
