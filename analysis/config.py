@@ -71,6 +71,7 @@ class Contact:
 class Slip:
     min_displacement_mm: float = spec(1.5, ge=0)
     min_rotation_deg: float = spec(0.9, ge=0)
+    min_still_rotation_deg: float = spec(0.45, ge=0)
     moving_confidence: float = spec(0.1, ge=0, le=1)
     arc_ratio: float = spec(0.04, ge=0)
     reference_s: float = spec(0.1, gt=0)

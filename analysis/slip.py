@@ -31,10 +31,12 @@ Decision (documented in docs/analysis.md, constants in ``analysis.slip``):
 - **slipped or only touched**: the contact slipped when its pattern moved at least
   ``min_displacement_mm`` from the reference window, or turned significantly (below); a touch
   held still — however far from the pad's middle it sits, however its load wanders — does not;
-- **rotation or translation**: a turn is significant when it is at least ``min_rotation_deg``
-  — for a contact that moved, the dynamic and the static flows' end values averaged (a pull's
-  spurious turn, which grows on the way, halves in them); for one whose centre of pressure stayed
-  within ``min_displacement_mm``, how far it turned where that is more (:func:`turn`); the
+- **rotation or translation**: a turn is significant when, for a contact that moved, the
+  dynamic and the static flows' end values averaged (a pull's spurious turn, which grows on the
+  way, halves in them) reach ``min_rotation_deg``; for one whose centre of pressure stayed
+  within ``min_displacement_mm``, when the static flow's rotation since the reference window
+  reaches ``min_still_rotation_deg`` or how far the flows' mean turned reaches
+  ``min_rotation_deg`` (:func:`turn`); the
   contact *rotated* when that turn, as the arc it sweeps at the contact's radius, is at least
   ``arc_ratio`` of the displacement (an object turned about an axis away from the contact also
   drags the contact sideways; a translation's own spurious turn is far smaller than its
@@ -173,9 +175,13 @@ def motion_reference(cf, activation, start: int, stop: int, rate: float, cfg) ->
     return first + (int(hits[0]) if hits.size else 0)
 
 
-LOADED = 0.8
+LOADED = 0.95
 """The reference window starts once the press has brought the load to this share of its level
-over the time after settling (``analysis.slip.reference_horizon_s``)."""
+over the time after settling (``analysis.slip.reference_horizon_s``). At 0.8 the press's last
+fifth, after the reference, changed a real contact frame's shape enough for the static flow to
+read a turn of up to 0.95° (0.44° at the 95th percentile: ``tests/real_touch.py``'s 90 records
+reached from rest); at 0.95 at most 0.23–0.35° over two draws of the resting noise — under
+``min_still_rotation_deg``."""
 
 
 def _loaded_end(load, fraction: float) -> int:
@@ -226,11 +232,18 @@ def estimate(cf, activation, start: int, stop: int, model, cfg, time=None, valid
         out["reason"] = reason
         return out
     motion = _motion_evidence(pm, end)
-    rotation, turned = _rotation_evidence(cf, views, ref, ref + end, model, pm, end, cfg.moving_confidence)
+    rotation, turned, static_turn = _rotation_evidence(cf, views, ref, ref + end, model, pm, end,
+                                                       cfg.moving_confidence)
     evidence["motion"], evidence["rotation"] = motion, rotation
     direction, agreement = _direction(motion, evidence)
     slip_class, confidence = classify(motion["displacement_mm"], rotation, pm.radius_mm, agreement, cfg)
     rotation["turn_deg"], rotation["read_as"] = turn(motion["displacement_mm"], rotation, cfg)
+    if rotation["read_as"] == "static" and static_turn is not None and \
+            (rotation["dynamic_deg"] or 0.0) * rotation["turn_deg"] <= 0:
+        # the summed curl dates a twist (finer in time) where it turned the way that was read;
+        # turned the other way it is noise (a third of a degree spread over a second), and the
+        # static turn dates it
+        turned = static_turn
     translated = slip_class == "translation"
     out.update(slip_direction_sensor_deg=direction if translated else None,
                slip_displacement_mm=motion["displacement_mm"], rotation_deg=rotation["turn_deg"],
@@ -304,9 +317,11 @@ def _motion_evidence(pm, end: int) -> dict:
             "reference_frames": pm.reference_frames, "frames": int(end)}
 
 
-def _rotation_evidence(cf, views, ref, stop, model, pm, end, moving) -> tuple[dict, np.ndarray | None]:
+def _rotation_evidence(cf, views, ref, stop, model, pm, end, moving) -> tuple[dict, np.ndarray | None,
+                                                                              np.ndarray | None]:
     """Rotation about the pad normal over the contact's loaded frames [ref, stop) (module
-    docstring), and the dynamic rotation summed frame by frame from the reference (deg)."""
+    docstring), the dynamic rotation summed frame by frame from the reference and the static
+    flow's rotation since the reference, frame by frame (deg; ``None`` where not measured)."""
     per_frame = rotation_series(cf, views, ref + 1, stop, model, moving)
     dynamic = moving_frames = None
     if per_frame is not None and len(per_frame) > 1:
@@ -324,7 +339,7 @@ def _rotation_evidence(cf, views, ref, stop, model, pm, end, moving) -> tuple[di
                 "moving_frames": moving_frames,
                 "static_deg": static, "pattern_turn_deg": turn, "pattern_elongation": pm.elongation,
                 "peak_deg": _peak_turn(per_frame, series)}
-    return evidence, (None if per_frame is None else np.r_[0.0, np.cumsum(per_frame)])
+    return evidence, (None if per_frame is None else np.r_[0.0, np.cumsum(per_frame)]), series
 
 
 def _peak_turn(per_frame, series, q: float = 90.0) -> float | None:
@@ -369,15 +384,23 @@ def turn(displacement, rotation: dict, cfg) -> tuple[float | None, str]:
     A contact that moved (its centre of pressure ``cfg.min_displacement_mm`` or more from its
     reference window) is always read so: a pull turns the rendered pattern by up to 0.7°/mm on
     the way (docs/analysis.md), and the two flows' opposite spurious turns halve in their end
-    values. ``"peak"``: how far the pattern turned (``rotation["peak_deg"]``, the 90th percentile
-    of the flows' mean turn over the contact), for a contact that stayed in place where it reads
-    more than the end values: nothing pulled it, so no pull's spurious turn grows on the way, and
-    a light twist's pattern can drift back once the object stops — its turn read by how far it
-    went, as its centre of pressure's excursion is (while a turn reached only in the contact's
-    last frames is read fully by its end values)."""
+    values. ``"static"``: for a contact that stayed in place, the static flow's rotation since the
+    reference window (``rotation["static_deg"]``) where it reaches ``cfg.min_still_rotation_deg``:
+    nothing pulled the contact, and at the shear the real contact frames allow a twist turns the
+    pattern by a third of a degree to a degree — one comparison with the reference keeps it (16
+    of 16 twists in the right sense on the SP grid at gain 3), while the frame-to-frame curl
+    summed loses it in its noise (4 of 16) and averaging the two halves it (docs/analysis.md, "At
+    the shear gain the real frames allow"). Otherwise, for a contact that stayed in place,
+    ``"peak"``: how far the two flows' mean turned (``rotation["peak_deg"]``, the 90th
+    percentile over the contact) where that reads more than the end values — a light twist's
+    pattern can drift back once the object stops (a turn reached only in the contact's last
+    frames is read fully by its end values); both held to ``cfg.min_rotation_deg``."""
     end = rotation.get("rotation_deg")
     peak = rotation.get("peak_deg")
+    static = rotation.get("static_deg")
     still = displacement is not None and math.isfinite(displacement) and displacement < cfg.min_displacement_mm
+    if still and static is not None and math.isfinite(static) and abs(static) >= cfg.min_still_rotation_deg:
+        return float(static), "static"
     if still and peak is not None and math.isfinite(peak) and (end is None or abs(peak) > abs(end)):
         return float(peak), "peak"
     return end, "end"
@@ -390,10 +413,11 @@ def classify(displacement, rotation: dict, radius_mm: float, agreement, cfg) -> 
     if displacement is None or not math.isfinite(displacement):
         return None, None
     d = displacement / max(cfg.min_displacement_mm, 1e-9)
-    rot, _ = turn(displacement, rotation, cfg)
+    rot, reading = turn(displacement, rotation, cfg)
+    least = cfg.min_still_rotation_deg if reading == "static" else cfg.min_rotation_deg
     turned = 0.0
     if rot is not None and math.isfinite(rot):
-        turned = abs(rot) / max(cfg.min_rotation_deg, 1e-9)
+        turned = abs(rot) / max(least, 1e-9)
     arc = abs(rot or 0.0) * math.pi / 180.0 * max(radius_mm, 0.0)
     if turned >= 1.0 and arc >= cfg.arc_ratio * displacement:
         return "rotation", float(min(1.0, turned / 2.0))
@@ -405,7 +429,9 @@ def classify(displacement, rotation: dict, radius_mm: float, agreement, cfg) -> 
 def _onset(pm, end: int, turned, slip_class: str | None) -> dict | None:
     """The knee of the motion (:mod:`analysis.slip_onset`): the centre of pressure's travel along
     its direction for a translation (or a touch: reported as evidence only), the summed dynamic
-    rotation for a rotation; frames relative to the reference window's first."""
+    rotation for a rotation (the static flow's rotation since the reference for one read by its
+    static turn whose summed curl turned the other way); frames relative to the reference
+    window's first."""
     d = pm.displacement[:end]
     mag = np.hypot(d[:, 0], d[:, 1])
     if slip_class == "rotation" and turned is not None:

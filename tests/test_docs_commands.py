@@ -136,6 +136,11 @@ TESTED: dict[str, object] = {
     'python benchmarks/bench_slip_direction.py --grid classic': BENCH,
     'python benchmarks/bench_slip_direction.py --grid varied': BENCH,
     'python benchmarks/bench_slip_direction.py --sensor biotac_sp --seeds 3 --real-touch 0': BENCH,
+    'python benchmarks/bench_slip_direction.py --sensor biotac_sp --real-touch 0 --out DIR': BENCH,
+    'python benchmarks/bench_slip_direction.py --sensor biotac_sp --real-touch 0 --set hardware.sensor.shear_kohm_per_n=3 '
+    '--out /tmp/shear3': BENCH,
+    'python benchmarks/bench_rotation_evidence.py --out /tmp/shear3 --set hardware.sensor.shear_kohm_per_n=3 '
+    '--real-touch 6': BENCH,
     'python benchmarks/bench_speed.py': BENCH,
     'python benchmarks/bench_speed.py --only analysis': BENCH,
     'python benchmarks/bench_speed.py --only analysis --repeat 3': BENCH,
@@ -285,6 +290,9 @@ TESTED: dict[str, object] = {
                 "P and V filled with one of the runs docs/analysis.md tables"),
     'tactile-run protocol=pour_grasp': NUMBERS,
     'tactile-run protocol=pour_grasp plan_only=true': HERE,
+    'tactile-run protocol=pour_grasp hardware.sensor.shear_kohm_per_n=3':
+        Variant("tactile-run protocol=pour_grasp hardware.sensor.shear_kohm_per_n=3 plan_only=true",
+                "composed and planned (a 60 s run; its figures in docs/analysis.md, measured by hand)"),
     'tactile-run protocol=pour_grasp_reactive':
         "tests/test_first_hour.py::test_a_reactive_pour_does_not_count_phases_it_never_reached_as_skipped",
     'tactile-run protocol=pour_grasp_reactive live.viewer=rerun':

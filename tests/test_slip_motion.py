@@ -118,20 +118,47 @@ def _slip_cfg():
     return Slip()
 
 
-def test_a_twist_whose_flows_drifted_back_is_read_by_how_far_it_turned():
+def test_a_twist_whose_flows_drifted_back_is_read_by_its_static_turn():
     """The SP grid's light twist on the flat board without tare: the pattern turned 1.35° while
     the board turned, then its dynamic flow drifted back (−0.58°) against the static flow (+0.82°),
     so their end values average 0.12°, below ``min_rotation_deg``; its centre of pressure stayed
-    within 0.83 mm. A contact that stayed in place is read by how far it turned: a rotation, the
-    right sense."""
+    within 0.83 mm. A contact that stayed in place is read by its static flow's turn since the
+    reference window: a rotation, the right sense."""
     from tactile_flow.analysis.slip import classify, turn
     cfg = _slip_cfg()
     rotation = {"rotation_deg": 0.12, "dynamic_deg": -0.58, "static_deg": 0.82, "peak_deg": 1.35}
-    assert turn(0.83, rotation, cfg) == (1.35, "peak")
+    assert turn(0.83, rotation, cfg) == (0.82, "static")
     cls, confidence = classify(0.83, rotation, 2.74, None, cfg)
     assert cls == "rotation" and 0.5 < confidence <= 1.0
     # the same contact read by its end values alone is a touch (round 2's miss)
-    assert classify(0.83, {**rotation, "peak_deg": None}, 2.74, None, cfg)[0] == "none"
+    assert classify(0.83, {**rotation, "peak_deg": None, "static_deg": None}, 2.74, None, cfg)[0] == "none"
+
+
+def test_a_twist_at_the_shear_the_real_frames_allow_is_a_rotation():
+    """The SP grid's firm counter-clockwise twist on the flat board without tare, with the
+    simulator's shear gain at 3 kΩ/N (the bound the real contact frames allow): the pattern
+    turned 0.79° in the static flow, while the dynamic curl summed read the wrong sense (−0.17°)
+    and their mean and its peak (0.31°, 0.40°) stayed under ``min_rotation_deg`` — round 3 read it
+    as a touch. Still (0.13 mm), read by the static turn: a rotation, counter-clockwise."""
+    from tactile_flow.analysis.slip import classify, turn
+    cfg = _slip_cfg()
+    rotation = {"rotation_deg": 0.31, "dynamic_deg": -0.17, "static_deg": 0.79, "peak_deg": 0.40}
+    assert turn(0.13, rotation, cfg) == (0.79, "static")
+    assert classify(0.13, rotation, 2.94, None, cfg)[0] == "rotation"
+    assert classify(0.13, {**rotation, "static_deg": None}, 2.94, None, cfg)[0] == "none"   # round 3
+
+
+def test_a_still_touch_whose_static_flow_turned_a_little_stays_a_touch():
+    """Real contact frames held still (tests/real_touch.py, 180 records) turn their static flow by
+    at most 0.35° once the reference window starts after the press (0.15° held from the first
+    frame): under ``min_still_rotation_deg``, a touch — while the same turn in a contact that
+    moved is read by its end values against ``min_rotation_deg``."""
+    from tactile_flow.analysis.slip import classify, turn
+    cfg = _slip_cfg()
+    rotation = {"rotation_deg": 0.2, "dynamic_deg": 0.05, "static_deg": 0.35, "peak_deg": 0.3}
+    assert cfg.min_still_rotation_deg > 0.35
+    assert classify(0.02, rotation, 7.0, None, cfg)[0] == "none"
+    assert turn(2.0, rotation, cfg) == (0.2, "end")
 
 
 def test_a_pull_is_read_by_its_end_values_so_its_spurious_turn_on_the_way_stays_a_pull():
