@@ -27,7 +27,7 @@ from . import packed
 from .appender import GrowingArray, metadata_bytes
 from .jsonvalues import jsonable, utc_now
 from .layout import STATUSES, dim_sizes, fixed_coords
-from .writer import _fill, plan
+from .writer import _fill, plan, row_counts
 
 _ZSTD = {"name": "zstd", "configuration": {"level": 0, "checksum": False}}
 #: a group's view in the consolidated metadata (zarr-python's: an empty inline block of its own)
@@ -130,15 +130,7 @@ class MemoryRunStore:
     def append_many(self, blocks: dict[str, dict[str, np.ndarray]]) -> dict[str, int]:
         """Rows appended to several blocks (as :meth:`RunStore.append_many`: every variable of
         a block, the same count of rows; encoded before anything is kept)."""
-        counts = {}
-        for block, data in blocks.items():
-            names = set(self._blocks[block])
-            if set(data) != names:
-                raise ValueError(f"{block}: expected variables {sorted(names)}, got {sorted(data)}")
-            lengths = {k: len(a) for k, a in data.items()}
-            if len(set(lengths.values())) != 1:
-                raise ValueError(f"{block}: variables of different lengths {lengths}")
-            counts[block] = next(iter(lengths.values()))
+        counts = row_counts(blocks, lambda block: set(self._blocks[block]))
         with self._lock:
             self._check_open()
             pending = [(self._blocks[block][name], self._arrays[self._blocks[block][name]].encode(self._length[block], a))

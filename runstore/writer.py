@@ -51,6 +51,21 @@ def _fill(dtype: str):
     return {"f8": float("nan"), "str": "", "bool": False}.get(dtype, 0)
 
 
+def row_counts(blocks: dict[str, dict[str, np.ndarray]], names) -> dict[str, int]:
+    """The rows each block of ``blocks`` adds; ``ValueError`` naming a block whose variables are
+    not ``names(block)`` (a set) or differ in length."""
+    counts = {}
+    for block, data in blocks.items():
+        expected = names(block)
+        if set(data) != expected:
+            raise ValueError(f"{block}: expected variables {sorted(expected)}, got {sorted(data)}")
+        lengths = {k: len(a) for k, a in data.items()}
+        if len(set(lengths.values())) != 1:
+            raise ValueError(f"{block}: variables of different lengths {lengths}")
+        counts[block] = next(iter(lengths.values()))
+    return counts
+
+
 class RunStore:
     """Writer of one run store. Thread-safe; normally driven by a single writer thread.
 
@@ -178,16 +193,7 @@ class RunStore:
         """:meth:`append` for several blocks at once. Every array's new chunks are encoded
         first (bad rows raise before anything is written), then written with the arrays' own
         ``zarr.json`` (:mod:`runstore.appender`). On failure every block is rolled back."""
-        counts = {}
-        for block, data in blocks.items():
-            blk = self.schema[block]
-            names = {v.name for v in blk.vars}
-            if set(data) != names:
-                raise ValueError(f"{block}: expected variables {sorted(names)}, got {sorted(data)}")
-            lengths = {k: len(a) for k, a in data.items()}
-            if len(set(lengths.values())) != 1:
-                raise ValueError(f"{block}: variables of different lengths {lengths}")
-            counts[block] = next(iter(lengths.values()))
+        counts = row_counts(blocks, lambda block: {v.name for v in self.schema[block].vars})
         with self._lock:
             self._check_open()
             write_all([self._arrays[block][name].encode(self._length[block], a)
