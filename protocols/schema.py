@@ -18,6 +18,8 @@ from typing import Any
 from hydra.core.config_store import ConfigStore
 from omegaconf import MISSING
 
+from tactile_flow.validation import ConfigError
+
 from .interlocks import SafetyConfig
 from .live import LiveConfig
 
@@ -79,8 +81,8 @@ ALLOWED_TARGETS = ("tactile_flow.protocols.cli.SweepSummary", "tactile_flow.prot
 
 
 def check_targets(node, key: str = "") -> None:
-    """Refuse any ``_target_`` outside :data:`ALLOWED_TARGETS`: a config must never make the
-    framework import or call arbitrary code."""
+    """Refuse any ``_target_`` outside :data:`ALLOWED_TARGETS` (:class:`validation.ConfigError`,
+    as every bad value): a config must never make the framework import or call arbitrary code."""
     from omegaconf import DictConfig, ListConfig
     if isinstance(node, (DictConfig, ListConfig)) and node._is_none():
         return
@@ -88,8 +90,8 @@ def check_targets(node, key: str = "") -> None:
         for k in node.keys():
             child = f"{key}.{k}" if key else str(k)
             if k == "_target_" and node.get(k) not in ALLOWED_TARGETS:
-                raise ValueError(f"{child}: {node.get(k)!r} is not allowed; configs may only name this project's "
-                                 f"classes {list(ALLOWED_TARGETS)}")
+                raise ConfigError(child, f"{node.get(k)!r} is not allowed; configs may only name this project's "
+                                         f"classes {list(ALLOWED_TARGETS)}")
             check_targets(node._get_node(k), child)
     elif isinstance(node, ListConfig):
         for i, item in enumerate(node._iter_ex(resolve=False)):

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from hydra import compose, initialize_config_dir
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from tactile_flow.hardware.errors import ConfigError
@@ -39,6 +39,7 @@ steps = st.recursive(
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(steps, max_size=6))
+@example([{"approach": {"at": {"_target_": None}}}])      # found by CI: refused as a ConfigError, not a bare ValueError
 def test_malformed_protocols_are_rejected_or_stay_within_limits(items):
     cfg = BASE.copy()
     cfg.protocol.steps = []
