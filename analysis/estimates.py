@@ -9,6 +9,8 @@ surface, so the finger's direction of motion is minus the tactile flow. Directio
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from tactile_flow.hardware.transforms import rotvec_to_matrix
@@ -63,6 +65,145 @@ def feature_width(signal, bump: seg.Bump, t, speed, level: float, min_speed: flo
     if not v >= min_speed:
         return float("nan"), dur, v
     return dur * v, dur, v
+
+
+@dataclass(frozen=True)
+class TaxelPlateaus:
+    """Where a crossed feature was under each electrode that felt it (:func:`taxel_plateaus`).
+
+    Attributes:
+        used: (M,) indices of those electrodes (columns of the activation).
+        start_mm, end_mm: (M,) distance the finger had travelled since the crossing's first frame
+            when each electrode's activation rose above / fell below its level, mm.
+        duration_s: (M,) how long each stayed above it, s.
+    """
+    used: np.ndarray
+    start_mm: np.ndarray
+    end_mm: np.ndarray
+    duration_s: np.ndarray
+
+    @property
+    def width_mm(self) -> np.ndarray:
+        return self.end_mm - self.start_mm
+
+    @property
+    def passing_mm(self) -> np.ndarray:
+        """(M,) distance travelled when the feature's middle was under each electrode, mm."""
+        return 0.5 * (self.start_mm + self.end_mm)
+
+
+def taxel_plateaus(activation, t, speed, level: float, strong: float) -> TaxelPlateaus | None:
+    """The plateau of every electrode that feels a crossed feature.
+
+    ``activation``: (n, N) smoothed activation of one finger's electrodes over the crossing (any
+    unit: only each electrode's own shape is read); ``t``: (n,) s; ``speed``: (n,) TCP speed,
+    mm/s. An electrode feels the feature when its rise over the crossing (peak above the lower of
+    its first value, last value and 0) is at least ``strong`` × the largest rise; its plateau is
+    where its activation stays above ``level`` of its own rise. ``None`` if nothing rose.
+    Nothing depends on the signal's scale: both thresholds are fractions of the signal's own rise.
+    """
+    a = np.asarray(activation, float)
+    tt = np.asarray(t, float)
+    v = np.asarray(speed, float)
+    if a.ndim != 2 or len(a) < 3:
+        return None
+    floor = np.minimum(np.minimum(a[0], a[-1]), 0.0)
+    rise = a.max(axis=0) - floor
+    if not rise.max() > 0:
+        return None
+    used = np.flatnonzero(rise >= strong * rise.max())
+    idx = np.arange(len(a), dtype=float)
+    dist = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(tt))])   # mm since frame 0
+    edges = []
+    for e in used:
+        s = a[:, e]
+        k = int(np.argmax(s))
+        lev = floor[e] + level * rise[e]
+        edges.append((seg._crossing(s, k, lev, -1), seg._crossing(s, k, lev, +1)))
+    lo, hi = np.asarray(edges, float).T
+    return TaxelPlateaus(used, np.interp(lo, idx, dist), np.interp(hi, idx, dist),
+                         np.interp(hi, idx, tt) - np.interp(lo, idx, tt))
+
+
+def feature_width_per_taxel(activation, t, speed, level: float, min_speed: float, strong: float = 0.3):
+    """Width (mm) of a crossed feature read on each electrode that feels it, not on their sum.
+
+    Arguments as :func:`taxel_plateaus`; the width is the median over those electrodes of the
+    distance the finger travelled (∫ speed dt) while the electrode's activation stayed above
+    ``level`` of its own rise. Returns (width, duration, speed, electrodes used): duration the
+    median time above the level (s), speed the mean over it (mm/s); width ``nan`` if the finger
+    moved slower than ``min_speed`` mm/s or no electrode rose.
+
+    Why per electrode: a sum over the pad adds the pad's own extent to every feature, so a round
+    6 mm straw and a flat 10 mm stick give bumps of nearly one shape (half-height widths 1.23×
+    apart on the pad sum, 1.67× in truth), and the skin-stretch (shear) share of the sum changes
+    that shape with the sensor's shear gain. One electrode sees the feature through its own
+    footprint only.
+    """
+    p = taxel_plateaus(activation, t, speed, level, strong)
+    nan = float("nan")
+    if p is None:
+        return nan, nan, nan, 0
+    width, dur = float(np.median(p.width_mm)), float(np.median(p.duration_s))
+    mean_speed = width / dur if dur > 0 else float(np.mean(speed))
+    if not mean_speed >= min_speed:
+        return nan, dur, mean_speed, len(p.used)
+    return width, dur, mean_speed, len(p.used)
+
+
+#: mm travelled per mm of electrode position across the pad below which a "crossing" passed every
+#: electrode at once (a press): a crossing of the simulated fingertip gives 0.23-0.8, a press ~0.01
+MIN_PASSING_GRADIENT = 0.1
+
+
+def ridge_from_passing(plateaus: TaxelPlateaus, positions, max_uncertainty_deg: float):
+    """Long axis of a straight feature from *where the finger was* when it passed each electrode.
+
+    A straight ridge swept across the pad passes an electrode at ``p`` (mm, sensor x–y) when the
+    finger has travelled s(p): constant along the ridge, growing across it. So the gradient of
+    the passing distances (:attr:`TaxelPlateaus.passing_mm`) over the electrodes' positions is
+    across the ridge, whatever the direction of motion. On a curved fingertip the contact rolls
+    rather than slides over the pad, so s grows less than linearly across the ridge (the outer
+    electrodes feel the feature while the contact is still near the pad's middle): the fit is
+    s = s0 + q·p + a·u² + b·u³, u = p along the first (linear) estimate of q, so that this
+    curvature does not count as noise. ``positions``: (N, ≥2) electrode positions, sensor frame,
+    mm (rows indexed like the activation's columns).
+
+    Returns (axis, uncertainty_deg, reason): ``axis`` (3,) unit, sensor frame (z = 0), at right
+    angles to q, and the standard error of q's direction (deg) from the fit's residuals; or
+    (``None``, uncertainty, reason) when the electrodes cannot fix it: fewer than 7 felt the
+    feature, they lie on a line, the finger moved less than :data:`MIN_PASSING_GRADIENT` mm per
+    mm across the pad between their passings (a press, not a crossing: its gradient is noise), or
+    the uncertainty is above ``max_uncertainty_deg``. Read from timing only:
+    the skin stretch shifts every electrode's plateau alike, and the signal's scale does not enter.
+    """
+    nan = float("nan")
+    xy = np.asarray(positions, float)[plateaus.used, :2]
+    s = plateaus.passing_mm
+    n = len(s)
+    if n < 7:
+        return None, nan, f"{n} electrodes felt the feature (at least 7 are needed to fix a ridge's axis)"
+    xy = xy - xy.mean(axis=0)
+    if np.linalg.svd(xy, compute_uv=False)[-1] < 1e-6 * max(np.abs(xy).max(), 1e-12):
+        return None, nan, "the electrodes that felt the feature lie on a line"
+    q = np.linalg.lstsq(np.c_[np.ones(n), xy], s, rcond=None)[0][1:]
+    if not np.linalg.norm(q) >= MIN_PASSING_GRADIENT:
+        return None, nan, (f"the feature passed the electrodes all at once (the finger moved "
+                           f"{np.linalg.norm(q):.2f} mm per mm across the pad between their passings, "
+                           f"a crossing: ≥ {MIN_PASSING_GRADIENT})")
+    u = xy @ (q / np.linalg.norm(q))
+    X = np.c_[np.ones(n), xy, u ** 2, u ** 3]
+    coef = np.linalg.lstsq(X, s, rcond=None)[0]
+    q = coef[1:3]
+    qn = float(np.linalg.norm(q))
+    resid = s - X @ coef
+    cov = float(resid @ resid) / (n - X.shape[1]) * np.linalg.pinv(X.T @ X)[1:3, 1:3]
+    across = np.array([-q[1], q[0]]) / qn if qn > 0 else np.array([1.0, 0.0])
+    unc = float(np.degrees(np.sqrt(max(float(across @ cov @ across), 0.0)) / qn)) if qn > 0 else float("inf")
+    if not unc <= max_uncertainty_deg:
+        return None, unc, (f"the electrodes' passing times fix the ridge's axis to ±{unc:.0f}° only "
+                           f"(above {max_uncertainty_deg:g}°)")
+    return np.array([across[0], across[1], 0.0]), unc, None
 
 
 def height_ranks(heights) -> np.ndarray:

@@ -144,9 +144,11 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
     if not contacts:
         skipped.append({"what": "run", "reason": "no finger in contact at any time: no segments, no flow"})
     if scheme == labelling.SWEEP:
-        # the 'during' plateau is measured on the width signal, so that the segment and the
-        # width estimate (plateau duration x speed) describe the same stretch
-        wsig = prepared.pad_proxy if cfg.estimates.width_signal == "proxy" else prepared.pressure
+        # the 'during' plateau is measured on the pad electrodes' sum (or the PDC with
+        # width_signal=pdc): with width_signal=proxy the segment and the width estimate (plateau
+        # duration x speed) describe the same stretch; with taxels the width is each electrode's
+        # own plateau (estimates.feature_width_per_taxel), the segment the pad's
+        wsig = prepared.pressure if cfg.estimates.width_signal == "pdc" else prepared.pad_proxy
         for f in bumps:
             k = run.fingers.index(f)
             ws = seg.smooth(wsig[:, k], rate, s.smooth_s)
@@ -278,7 +280,8 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
     """One row per feature crossed: direction (sensor, world), width, height, texture angle."""
     out = []
     e = cfg.estimates
-    width_sig = prepared.pad_proxy if e.width_signal == "proxy" else prepared.pressure
+    width_sig = prepared.pressure if e.width_signal == "pdc" else prepared.pad_proxy
+    pad = run.sensor.pad if run.sensor is not None and run.sensor.pad is not None else slice(None)
     speed = None
     if run.arm_time is not None and run.tcp_speed is not None:
         speed = est.speed_mm_s(run.arm_time, run.tcp_speed, run.time)
@@ -314,9 +317,19 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
                     skipped.append({"what": "direction_world", "finger": f, "feature": row["feature"],
                                     "reason": "no arm pose or no fingertip pose in the run's config"})
                 row["direction_world"] = d_w
+                plateaus = None
                 if speed is not None:
-                    width, dur, v = est.feature_width(sig, b, run.time, speed, cfg.segmentation.plateau_level,
-                                                      e.min_speed_mm_s)
+                    act = seg.smooth(np.asarray(prepared.activation[b.start:b.stop, k], float)[:, pad], rate,
+                                     cfg.segmentation.smooth_s)
+                    plateaus = est.taxel_plateaus(act, run.time[b.start:b.stop], speed[b.start:b.stop],
+                                                  e.width_level, e.texture_taxel_fraction)
+                    if e.width_signal == "taxels":
+                        width, dur, v, _ = est.feature_width_per_taxel(act, run.time[b.start:b.stop],
+                                                                       speed[b.start:b.stop], e.width_level,
+                                                                       e.min_speed_mm_s, e.width_taxel_fraction)
+                    else:
+                        width, dur, v = est.feature_width(sig, b, run.time, speed, cfg.segmentation.plateau_level,
+                                                          e.min_speed_mm_s)
                     row.update(width_mm=width, plateau_s=dur, speed_mm_s=v)
                     if not np.isfinite(width):
                         skipped.append({"what": "width", "finger": f, "feature": row["feature"],
@@ -325,12 +338,24 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
                     row.update(width_mm=float("nan"), plateau_s=float("nan"), speed_mm_s=float("nan"))
                     skipped.append({"what": "width", "finger": f, "feature": row["feature"],
                                     "reason": "no TCP speed recorded (arm group missing)"})
-                ridge = None
-                if cf is not None and "bottom" in cf.views:
+                ridge, why = None, None
+                if e.texture_angle == "passing":
+                    if plateaus is None:
+                        why = "no TCP speed recorded" if speed is None else "no electrode rose over the crossing"
+                    else:
+                        ridge, unc, why = est.ridge_from_passing(plateaus, model.taxels[pad],
+                                                                 e.texture_max_uncertainty_deg)
+                        row["texture_angle_uncertainty_deg"] = unc
+                elif cf is not None and "bottom" in cf.views:
                     vr = cf.views["bottom"]
                     ridge = est.ridge_axis(vr.frames[b.peak - cf.window[0]], model.plans["bottom"].mask,
                                            model.plans["bottom"])
+                    why = None if ridge is not None else "the pressed region at the peak is round"
+                else:
+                    why = "no bottom view over this crossing"
                 row["texture_angle_deg"] = est.texture_angle_deg(ridge, d_s)
+                if why is not None:
+                    skipped.append({"what": "texture_angle", "finger": f, "feature": row["feature"], "reason": why})
                 out.append(row)
     for f in {r["finger"] for r in out}:
         rows = [r for r in out if r["finger"] == f]
