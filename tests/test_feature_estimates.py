@@ -29,8 +29,7 @@ def _pad(pitch=3.0, n=5):
     return np.c_[xx.ravel(), yy.ravel()]                  # (N, 2) mm, sensor x–y
 
 
-def _crossing(width, axis_deg=90.0, heading_deg=0.0, shear_gain=0.0, sigma=2.5, profile="flat", scale=1.0,
-              lateral_mm=6.0):
+def _crossing(width, axis_deg=90.0, heading_deg=0.0, shear_gain=0.0, sigma=2.5, lateral_mm=6.0):
     """(T, N) activation of a pad swept at SPEED over one straight feature of ``width`` mm whose
     long axis is at ``axis_deg`` (sensor frame), the finger heading ``heading_deg``; (T,) time."""
     taxels = _pad()
@@ -41,18 +40,18 @@ def _crossing(width, axis_deg=90.0, heading_deg=0.0, shear_gain=0.0, sigma=2.5, 
     centre = -(t - 1.5)[:, None] * SPEED * d                                        # (T, 2) mm
     u = np.linspace(-15, 15, 301)                                                   # across the ridge, mm
     du = u[1] - u[0]
-    h = (np.abs(u) <= width / 2).astype(float) if profile == "flat" else \
-        np.sqrt(np.clip(1 - (2 * u / width) ** 2, 0, None))
+    h = (np.abs(u) <= width / 2).astype(float)                                     # a flat-topped feature
     off = taxels[None] - centre[:, None]                                            # (T, N, 2)
     across = off @ n                                                                # (T, N)
-    load = (np.exp(-(across[..., None] - u) ** 2 / (2 * sigma ** 2)) * h).sum(-1) * du / (sigma * math.sqrt(2 * math.pi)) * 0.3
+    kernel = np.exp(-(across[..., None] - u) ** 2 / (2 * sigma ** 2)) / (sigma * math.sqrt(2 * math.pi))
+    load = 0.3 * (kernel * h).sum(-1) * du                                          # peak ≈ 0.3 of the fluid
     load *= np.exp(-(taxels ** 2).sum(1) / (2 * lateral_mm ** 2))[None]             # the pad curves away
     load = np.clip(load, 0, 0.9)
     act = 1.0 / (1.0 - load) - 1.0                                                  # convex: fluid thinning
     ahead = off @ d
     shear = shear_gain * load.sum(1, keepdims=True) / load.shape[1] * (ahead / 4.0) * np.exp(-ahead ** 2 / 32.0)
     act = act + np.where(shear < 0, 0.3 * shear, shear)
-    return scale * act, t, taxels
+    return act, t, taxels
 
 
 def _per_taxel_width(act, t):
