@@ -263,6 +263,15 @@ TESTED: dict[str, object] = {
     'tactile-run -m protocol=straws_sweep,sticks_sweep protocol.sweep_speed=5,10,20':
         Variant("tactile-run -m protocol=straws_sweep,sticks_sweep protocol.sweep_speed=5,10,20 plan_only=true "
                 "hydra.sweep.dir={tmp}/sweep", "6 whole runs: every job composed and planned"),
+    'tactile-run -m protocol=straws_sweep,sticks_sweep protocol.sweep_speed=5,10,20 hardware.sensor.shear_kohm_per_n=3 '
+    'analysis.figures=false':
+        Variant("tactile-run -m protocol=straws_sweep,sticks_sweep protocol.sweep_speed=5,10,20 "
+                "hardware.sensor.shear_kohm_per_n=3 analysis.figures=false plan_only=true hydra.sweep.dir={tmp}/sweep3",
+                "6 whole runs: every job composed and planned (their figures in docs/analysis.md, measured by hand)"),
+    'tactile-run "hardware.fingertips.ff=[0,0,0,2.902453,-1.202235,0]" hardware.sensor.shear_kohm_per_n=G':
+        Variant('tactile-run "hardware.fingertips.ff=[0,0,0,2.902453,-1.202235,0]" hardware.sensor.shear_kohm_per_n=3 '
+                "plan_only=true", "G filled with 3, composed and planned (the turned tip's run: "
+                "tests/test_direction_off_axis.py; the figures in docs/analysis.md, measured by hand)"),
     'tactile-run ... live.viewer=rerun': "tests/test_viewer.py::test_the_live_viewer_shows_every_frame_the_monitor_processed",
     'tactile-run ... protocol.sweep_speed=20': Variant("tactile-run protocol.sweep_speed=20 progress=false analyze=false",
                                                          "the default protocol for the '...'"),
