@@ -327,17 +327,19 @@ def _rotation_evidence(cf, views, ref, stop, model, pm, end, moving) -> tuple[di
     if per_frame is not None and len(per_frame) > 1:
         dynamic = float(per_frame.sum())
         moving_frames = int(np.count_nonzero(per_frame))
-    static = series = None
+    static = series = straightness = None
     if cf.reference is not None:
         series = static_rotation_series(cf, views, ref, stop, model)
         if series is not None and len(series):
             static = float(np.median(series[-max(1, len(series) // 5):]))
+            path = float(np.abs(np.diff(series)).sum())
+            straightness = abs(static) / path if path > 0 else None
     tail = pm.turn_deg[max(0, end - max(1, end // 5)):end]
     turn = float(np.median(tail)) if len(tail) else None
     both = [v for v in (dynamic, static) if v is not None]
     evidence = {"rotation_deg": float(np.mean(both)) if both else None, "dynamic_deg": dynamic,
                 "moving_frames": moving_frames,
-                "static_deg": static, "pattern_turn_deg": turn, "pattern_elongation": pm.elongation,
+                "static_deg": static, "static_straightness": straightness, "pattern_turn_deg": turn, "pattern_elongation": pm.elongation,
                 "peak_deg": _peak_turn(per_frame, series)}
     return evidence, (None if per_frame is None else np.r_[0.0, np.cumsum(per_frame)]), series
 
