@@ -15,7 +15,9 @@ displacement and its contact's radius. Then a markdown table, per evidence: the 
 same evidence of records of real touches (``tests/real_touch.py``, ``N`` frames per finger and
 grasp file, written in ``--out``): its 95th percentile and largest |turn|. Last, for the
 contacts that stayed in place, what a threshold on the decision's turn or on ``static_deg``
-alone would recognise and read wrongly (docs/analysis.md). ``--rows FILE ...``
+alone would recognise and read wrongly (docs/analysis.md), and for them the static turn with
+how straight it went (``static_straightness``: |end| / the path it travelled), alone and together
+with a threshold on the turn. ``--rows FILE ...``
 tabulates the JSON lines of earlier runs instead of analysing the grid (real touches added
 either way).
 
