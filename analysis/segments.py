@@ -168,8 +168,10 @@ def plateau_duration(pressure, bump: Bump, rate_hz: float, level: float = 0.5) -
 def first_drop(signal, start: int, fraction: float, window: int, noise_k: float = 8.0,
                largest: bool = False) -> int | None:
     """Onset of the first sudden fall of ``signal`` (T,) at or after ``start``: the frame of its
-    steepest descent within the first window of ``window`` frames over which it falls by more
-    than max(``fraction`` × its range after ``start``, ``noise_k`` × its noise). The noise is
+    steepest descent over the fall — the frames from which it falls within ``window`` frames by
+    more than max(``fraction`` × its range after ``start``, ``noise_k`` × its noise), and a
+    window on (a non-causal smoother leads a step by a gentle decline that may pass the
+    threshold first). The noise is
     the robust std (MAD) of the signal about its running median over ``window`` frames, so
     slow trends do not count and coloured (smoothed) noise is not underestimated. ``None`` if
     it never falls so fast. ``largest``: the deepest such fall instead of the first.
@@ -193,7 +195,14 @@ def first_drop(signal, start: int, fraction: float, window: int, noise_k: float 
     i = int(hit[np.argmax(fall[hit])]) if largest else int(hit[0])
     if largest:
         i = max(0, i - window)
-    j = min(n - 1, i + 2 * window if largest else i + window)
+        j = min(n - 1, i + 2 * window)
+    else:
+        # the fall's own extent: every frame from which it still falls so fast, and a window
+        # on (a smoothed fall may pass the threshold well ahead of its steepest step)
+        e = i
+        while e + 1 < n and fall[e + 1] > thr:
+            e += 1
+        j = min(n - 1, e + window)
     steep = i + int(np.argmin(np.diff(x[i:j + 1])))
     return start + steep + 1
 

@@ -118,6 +118,19 @@ def test_edge_crossing_reads_a_fall_by_its_own_depth():
     assert abs(t[seg.edge_crossing(7 * x + 3, edge, 0, 50, -53.0, 0.5)] - 20.0) < 0.03
 
 
+def test_first_drop_dates_a_fall_that_a_smoother_led_by_its_steepest_step():
+    """A non-causal smoother (the activation's RTS pass) starts a sudden fall early: a gentle
+    decline ahead of the step. The fall is dated at its steepest step, however early the
+    decline first passes the threshold."""
+    t = np.arange(3000) / RATE
+    x = 3.0 - 0.6 * np.clip((t - 9.4) / 0.6, 0, 1)                       # the smoother's lead
+    x = x - 1.0 * np.clip((t - 10.0) / 0.03, 0, 1) * np.exp(-np.clip(t - 10.03, 0, None) / 0.3)
+    x = x + np.random.default_rng(2).normal(0, 0.005, len(t))
+    for fraction in (0.15, 0.05):
+        i = seg.first_drop(x, 200, fraction, 50)
+        assert abs(t[i] - 10.0) < 0.04, (fraction, t[i])
+
+
 def made_up_grasp(gain):
     """A pour as the pads read it at a shear gain ``gain`` (12: the simulator's former
     default, 3: what real BioTac SP frames allow): the pad pressure sinks with the shear term
