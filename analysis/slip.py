@@ -327,17 +327,19 @@ def _rotation_evidence(cf, views, ref, stop, model, pm, end, moving) -> tuple[di
     if per_frame is not None and len(per_frame) > 1:
         dynamic = float(per_frame.sum())
         moving_frames = int(np.count_nonzero(per_frame))
-    static = series = None
+    static = series = straightness = None
     if cf.reference is not None:
         series = static_rotation_series(cf, views, ref, stop, model)
         if series is not None and len(series):
             static = float(np.median(series[-max(1, len(series) // 5):]))
+            path = float(np.abs(np.diff(series)).sum())
+            straightness = abs(static) / path if path > 0 else None
     tail = pm.turn_deg[max(0, end - max(1, end // 5)):end]
     turn = float(np.median(tail)) if len(tail) else None
     both = [v for v in (dynamic, static) if v is not None]
     evidence = {"rotation_deg": float(np.mean(both)) if both else None, "dynamic_deg": dynamic,
                 "moving_frames": moving_frames,
-                "static_deg": static, "pattern_turn_deg": turn, "pattern_elongation": pm.elongation,
+                "static_deg": static, "static_straightness": straightness, "pattern_turn_deg": turn, "pattern_elongation": pm.elongation,
                 "peak_deg": _peak_turn(per_frame, series)}
     return evidence, (None if per_frame is None else np.r_[0.0, np.cumsum(per_frame)]), series
 
@@ -456,27 +458,35 @@ def _release(when: dict, raw, n_ref: int, rate: float, along=None) -> None:
     ahead of the drag, unloading behind it; for a twist two opposite quadrants of the contact —
     falls back along its own pattern within a few frames (the first tooth of the stick-slip;
     ``tactile.slip``'s ``release`` criterion sees the same thing live). That pattern is
-    ``along`` (n,) kΩ: the smoothed activation's change from the motion onset to the knee; the
+    ``along`` (n,) kΩ: the smoothed activation's change from the motion onset to the knee, less
+    its part along the reference pattern (:func:`_shape_change`: a press that goes on loading
+    the contact is not the stretch); the
     unsmoothed activation's change since the reference window is projected on it (without it:
     its total positive change, which sees only the loading side and little of a twist, whose
     loads and unloads nearly cancel), running-median filtered over 3 frames. The first fall
     after the motion onset, from a new high at least :data:`RELEASE_HEIGHT` of the way up to the
     window's highest, by at least :data:`RELEASE_SHARE` of the rise so far and
-    :data:`RELEASE_NOISE` × its frame-to-frame noise marks it (a press that settles, or the
+    :data:`RELEASE_NOISE` × its frame-to-frame noise (over the still frames up to the motion
+    onset: a ratio to the signal's own noise, whatever the sensor's shear gain) marks it (a press that settles, or the
     holder's wander, lowers the load too, but not from the top of a stretch): the slip onset is
     the frame before the fall (uncertainty: the fall's length). Without such a fall the knee
     stands."""
     ref = raw[:n_ref].mean(axis=0)
-    if along is not None and np.all(np.isfinite(along)) and np.any(along):
+    along = _shape_change(along, ref)
+    if along is not None:
         load = (raw - ref) @ (along / np.linalg.norm(along))
     else:
         load = np.clip(raw - ref, 0.0, None).sum(axis=1)
     if len(load) < 8:
         return
     smooth = _running_median3(load)
-    steps = np.diff(smooth[:n_ref + 1]) if n_ref > 2 else np.diff(smooth)
-    noise = 1.4826 * float(np.median(np.abs(steps - np.median(steps)))) if len(steps) else 0.0
     start = when["motion_frame"]
+    # the signal's own noise: its frame-to-frame steps while the contact was still (the reference
+    # window and on to the motion onset; the window's 10 frames alone give a noise that is itself
+    # ±25 % noisy, and a fall of 4 of them is then a frame or two of noise on a faint twist)
+    still = max(start, n_ref) if n_ref > 2 else len(smooth) - 1
+    steps = np.diff(smooth[:still + 1])
+    noise = 1.4826 * float(np.median(np.abs(steps - np.median(steps)))) if len(steps) else 0.0
     horizon = min(len(smooth), when["slip_frame"] + int(round(RELEASE_AFTER_S * rate)) + 1)
     fall = max(1, int(round(RELEASE_FRAMES)))
     top = float(smooth[start:horizon].max()) - smooth[start]
@@ -488,6 +498,20 @@ def _release(when: dict, raw, n_ref: int, rate: float, along=None) -> None:
             bottom = i + 1 + int(np.argmin(smooth[i + 1:i + 1 + fall]))
             when.update(slip_frame=i + 1, uncertainty_frames=max(1.0, (bottom - i) / 2.0), dated_by="release")
             return
+
+
+def _shape_change(along, ref) -> np.ndarray | None:
+    """``along`` (n,) kΩ less its part along the reference pattern ``max(ref, 0)`` (n,): a firmer
+    or lighter press of the same shape is not a stretch (a tared press still settling after its
+    reference window loads every electrode of the contact in proportion, and would otherwise be
+    most of what a faint twist's pattern holds). ``None`` where nothing is left."""
+    if along is None or not np.all(np.isfinite(along)) or not np.any(along):
+        return None
+    shape = np.clip(np.asarray(ref, float), 0.0, None)
+    norm = float(np.linalg.norm(shape))
+    if norm > 0 and np.all(np.isfinite(shape)):
+        along = along - (along @ shape) / norm ** 2 * shape
+    return along if np.linalg.norm(along) > 0 else None
 
 
 def _running_median3(x: np.ndarray) -> np.ndarray:

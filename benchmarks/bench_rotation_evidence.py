@@ -15,7 +15,9 @@ displacement and its contact's radius. Then a markdown table, per evidence: the 
 same evidence of records of real touches (``tests/real_touch.py``, ``N`` frames per finger and
 grasp file, written in ``--out``): its 95th percentile and largest |turn|. Last, for the
 contacts that stayed in place, what a threshold on the decision's turn or on ``static_deg``
-alone would recognise and read wrongly (docs/analysis.md). ``--rows FILE ...``
+alone would recognise and read wrongly (docs/analysis.md), and for them the static turn with
+how straight it went (``static_straightness``: |end| / the path it travelled), alone and together
+with a threshold on the turn. ``--rows FILE ...``
 tabulates the JSON lines of earlier runs instead of analysing the grid (real touches added
 either way).
 
@@ -60,7 +62,8 @@ def rows_of(args) -> list[dict]:
                        "read": est["slip_class"], "displacement_mm": est["slip_displacement_mm"],
                        "radius_mm": motion["radius_mm"], "elongation": rot.get("pattern_elongation"),
                        "change": motion.get("change"), "change_noise": motion.get("change_noise"),
-                       "read_as": rot.get("read_as"), **{k: rot.get(k) for k in EVIDENCE}}
+                       "read_as": rot.get("read_as"), "static_straightness": rot.get("static_straightness"),
+                       **{k: rot.get(k) for k in EVIDENCE}}
                 print(json.dumps(row), flush=True)
                 out.append(row)
     return out
@@ -89,6 +92,7 @@ def real_touch_rows(out: Path, per_finger: int) -> list[dict]:
                        "change": est["evidence"]["motion"].get("change"),
                        "change_noise": est["evidence"]["motion"].get("change_noise"),
                        "elongation": rot.get("pattern_elongation"), "read_as": rot.get("read_as"),
+                       "static_straightness": rot.get("static_straightness"),
                        **{k: rot.get(k) for k in EVIDENCE}}
                 print(json.dumps(row), flush=True)
                 rows.append(row)
@@ -168,6 +172,38 @@ def thresholds(rows: list[dict], min_displacement_mm: float) -> str:
     return "\n".join(lines)
 
 
+STRAIGHT = ((0.25, 0.15), (0.25, 0.2), (0.3, 0.15), (0.35, 0.0))
+"""(|``static_deg``| deg, ``static_straightness``) pairs :func:`straightness` counts."""
+
+
+def straightness(rows: list[dict], min_displacement_mm: float) -> str:
+    """Markdown: for the contacts that stayed in place, the static turn and how straight it went
+    (``static_straightness``: |end| / the path it travelled) — the twists' smallest, the touches'
+    (simulated, real from the first frame, real reached from rest) largest — and what reading a
+    twist by both at once would recognise and read wrongly (docs/analysis.md)."""
+    groups = {"twists": lambda r: r["motion"] == "rotate", "touches": lambda r: r["motion"] == "none",
+              "real, first frame": lambda r: r["motion"] == "real_touch" and r["run"].startswith("first/"),
+              "real, from rest": lambda r: r["motion"] == "real_touch" and r["run"].startswith("rest/")}
+    still = [r for r in rows if r["displacement_mm"] < min_displacement_mm and r.get("static_deg") is not None
+             and r.get("static_straightness") is not None]
+    lines = ["| | " + " | ".join(groups) + " |", "| --- " * (len(groups) + 1) + "|"]
+    for key, label in (("static_deg", "\\|`static_deg`\\|, deg"), ("static_straightness", "`static_straightness`")):
+        cells = []
+        for name, member in groups.items():
+            v = [abs(r[key]) for r in still if member(r)]
+            cells.append("–" if not v else (f"smallest {min(v):.2f}" if name == "twists" else f"largest {max(v):.2f}"))
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    for t, q in STRAIGHT:
+        cells = []
+        for name, member in groups.items():
+            mine = [r for r in still if member(r)]
+            hit = sum(abs(r["static_deg"]) >= t and r["static_straightness"] >= q
+                      and (name != "twists" or r["static_deg"] * r["sense"] > 0) for r in mine)
+            cells.append(f"{hit}/{len(mine)}")
+        lines.append(f"| ≥ {t:.2f}° and straightness ≥ {q:.2f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path(os.environ.get("TMPDIR", "/tmp")) / "bench_slip_direction")
@@ -191,6 +227,9 @@ def main(argv=None) -> None:
     print(table(rows))
     print("\n(twists: recognised with the right sense; touches: read as rotations)\n")
     print(thresholds(rows, load_config({}).slip.min_displacement_mm))
+    print("\n(contacts that stayed in place: the static turn and how straight it went; twists: recognised "
+          "with the right sense, touches: read as rotations)\n")
+    print(straightness(rows, load_config({}).slip.min_displacement_mm))
 
 
 if __name__ == "__main__":

@@ -141,6 +141,8 @@ TESTED: dict[str, object] = {
     '--out /tmp/shear3': BENCH,
     'python benchmarks/bench_rotation_evidence.py --out /tmp/shear3 --set hardware.sensor.shear_kohm_per_n=3 '
     '--real-touch 6': BENCH,
+    'python benchmarks/bench_rotation_evidence.py --out /tmp/shear3 --set hardware.sensor.shear_kohm_per_n=3 '
+    '--seeds 2 --real-touch 6': BENCH,
     'python benchmarks/bench_speed.py': BENCH,
     'python benchmarks/bench_speed.py --only analysis': BENCH,
     'python benchmarks/bench_speed.py --only analysis --repeat 3': BENCH,
