@@ -60,7 +60,7 @@ class Estimates:
 
 @dataclass(frozen=True)
 class Pour:
-    rotation_rad: float = spec(0.015, gt=0)
+    rotation_noise_k: float = spec(6.0, gt=0)
     trough_prominence: float = 0.15
 
 

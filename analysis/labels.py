@@ -149,7 +149,7 @@ class PourPhases:
     not_reached: dict = field(default_factory=dict)
 
 
-def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | None, rotation_rad: float,
+def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | None, rotation_noise_k: float,
                 trough_prominence: float, distance: int, level: float = 0.5, fast=None,
                 reaction: int | None = None) -> PourPhases:
     """Onsets of the pour phases of one grasp finger.
@@ -159,7 +159,8 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
         reference: frame where the contact became established (static-flow reference) or None.
         rotation: (T,) static-flow rotation (rad, curl/2; NaN outside the flow window).
         pour_event: frame of the protocol's ``pour`` step, if recorded (refines the start).
-        rotation_rad: rotation that marks the rotation phase (onset by the tangent method).
+        rotation_noise_k: how many times its own noise the static-flow rotation must turn
+            within ``distance`` frames to mark the rotation phase.
         trough_prominence: fraction of the pressure's range (pour start to full slip) the
             initial-slip fall must reach.
         distance: frames over which that fall is measured.
@@ -172,15 +173,21 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
     - initial_slip: the first sudden fall of ``fast`` after the pour start, deeper than
       ``trough_prominence`` × the pressure's range there and well above its noise
       (:func:`segments.first_drop`): the trough as the bottle first gives;
-    - rotation: static-flow rotation beyond ``rotation_rad``, moved back along its tangent,
-      but not before the rise itself starts (:func:`segments.rise_start`: a torsional breakaway
-      turns the pattern quickly, then slowly);
-    - downward: the deepest sudden fall of ``fast`` after the rotation (or slip, or pour) onset:
-      the contact breaks away and the pad keeps only the kinetic friction (the skin stretch,
+    - rotation: the knee (:func:`segments.knee`) of the largest sudden turn of the static-flow
+      rotation between the pour start and the full slip's edge, a turn within ``distance``
+      frames of more than ``rotation_noise_k`` × its own noise
+      (:func:`segments.largest_change`): the torsional breakaway, where the bottle starts to
+      turn; its size (which scales with the sensor's shear gain) does not decide;
+    - downward: the deepest sudden fall of ``fast`` (one well above its noise; its depth is
+      not compared with the pressure's range, which its slow trend with the load dominates on a
+      sensor of low shear gain) after the rotation (or slip, or pour) onset and before the
+      full slip's edge: the contact breaks away and the pad keeps only the kinetic friction (the skin stretch,
       the tangential load, falls); without one (a creeping slide) the maximum of ``pressure``
       there: the tangential load stops growing;
-    - full_slip: the last fall of ``fast`` below ``level`` of the way from the level after the
-      contact up to its contact median.
+    - full_slip: the contact's final fall (the steepest step of ``fast`` within ``distance`` of
+      the contact's end) where it passes ``level`` of its own depth, from the level just before
+      it down to the level after the contact (:func:`segments.edge_crossing`): the bottle
+      leaves the grasp.
 
     A reactive pour (``reaction`` inside the contact: the protocol tightened the grasp the
     moment the live detector saw the slip) has ``pour``, ``initial_slip`` (searched up to a
@@ -197,15 +204,25 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
     q = p if fast is None else np.asarray(fast, float)
     if reaction is not None and start < reaction < b:
         return _reactive_phases(q, onsets, start, reaction, b, trough_prominence, distance, t)
-    med = float(np.median(q[a:b]))
     # the level after the contact (the pad unloaded, up to drift), 0 if the record ends in it
     post = float(np.median(q[b:b + max(distance, 5)])) if b < len(q) else 0.0
-    below = np.flatnonzero(q[start:b] >= post + level * (med - post))
-    full = start + int(below[-1]) + 1 if below.size else b
-    full = min(full, b)
+    full = b
+    if b < len(q) - 1:
+        # the final fall: its steepest step near the contact's end, read at `level` of its own
+        # depth (the pad's level before it moves with the shear term: a level fixed by the
+        # contact's median would be crossed early by a pressure that sinks as the load grows)
+        lo, hi = max(start, b - distance), min(len(q) - 1, b + distance)
+        if hi - lo > 2:
+            steepest = lo + int(np.argmin(np.diff(q[lo:hi + 1])))
+            full = min(b, seg.edge_crossing(q, steepest, start, distance, post, level))
+    # where the final fall (the full slip's edge) begins: the earlier phases come before it
+    edge = min(full, len(q) - 1)
+    while edge > start + 1 and q[edge - 1] > q[edge]:
+        edge -= 1
+    edge = max(start, edge - 3)
     # the bottle first gives: the first sudden fall of the (lightly smoothed) pressure between
-    # the pour start and the full slip (stored strain released, load taken off the pad)
-    slip = seg.first_drop(q[:full], start, trough_prominence, distance)
+    # the pour start and the full slip's edge (stored strain released, load taken off the pad)
+    slip = seg.first_drop(q[:edge], start, trough_prominence, distance)
     if slip is None:
         reasons["initial_slip"] = ("no pressure trough (a sudden fall: the bottle giving) between the pour start "
                                    "and the full slip")
@@ -213,23 +230,24 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
     rot = np.asarray(rotation, float)
     valid = np.isfinite(rot)
     r_on = None
-    if valid[start:full].sum() > 3:
+    # the rotation's own smoothing spreads the full slip's edge back: stop a window before it
+    stop = full - distance
+    if valid[start:stop].sum() > distance + 3:
         r = np.where(valid, rot, 0.0)
-        r_on = seg.onset_by_tangent(t[:full], r[:full], rotation_rad, start=start)
-        r_rise = seg.rise_start(r[:full], rotation_rad, start=start)
-        if r_on is not None and r_rise is not None:
-            r_on = max(r_on, r_rise)      # the tangent dates a sharp, then levelling rise too early
+        turn = seg.largest_change(r, start, stop, distance, rotation_noise_k)
+        if turn is not None:
+            steep = turn[0]
+            r_on = seg.knee(t, r, max(start, steep - 2 * distance), steep)
     if r_on is None:
-        reasons["rotation"] = f"static-flow rotation never exceeds {rotation_rad:g} rad"
+        reasons["rotation"] = (f"no sudden turn of the static-flow rotation (more than {rotation_noise_k:g} × its noise "
+                               f"within {distance} frames) between the pour start and the full slip")
     onsets["rotation"] = r_on
     # the contact breaks away: the pad keeps only the kinetic friction, the skin's stretch
     # falls: the deepest sudden fall after the slip / rotation onsets and before the full slip
+    # (out of the noise; not a share of the range, which the pressure's drift with the load sets)
     after = max(x for x in (start, slip, r_on) if x is not None)
-    edge = min(full, len(q) - 1)            # where the final fall (the full slip's edge) begins
-    while edge > after + 1 and q[edge - 1] > q[edge]:
-        edge -= 1
-    edge = max(after, edge - 3)
-    down = seg.first_drop(q[:edge], after, trough_prominence, distance, largest=True) if edge - after > 3 else None
+    edge = max(after, edge)
+    down = seg.first_drop(q[:edge], after, 0.0, distance, largest=True) if edge - after > 3 else None
     if down is not None and down >= edge - 2:
         down = None
     if down is None and full - after > 3:

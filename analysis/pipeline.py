@@ -395,7 +395,7 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
             # the grasp tightened right after the slip: a smoothed pressure would carry that rise
             # back over the slip's fall, so the slip is dated on the causal (filter-only) proxy
             fast = np.asarray(prepared.causal_proxy[:, k], float)
-        ph = labelling.pour_phases(run.time, p, (a, b), ref, rot, pour_event, cfg.pour.rotation_rad,
+        ph = labelling.pour_phases(run.time, p, (a, b), ref, rot, pour_event, cfg.pour.rotation_noise_k,
                              cfg.pour.trough_prominence, int(round(cfg.segmentation.distance_s * rate)),
                              cfg.segmentation.plateau_level, fast=fast, reaction=reaction)
         for name, why in ph.reasons.items():

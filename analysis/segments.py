@@ -165,32 +165,13 @@ def plateau_duration(pressure, bump: Bump, rate_hz: float, level: float = 0.5) -
     return lo / rate_hz, hi / rate_hz, (hi - lo) / rate_hz
 
 
-def onset_by_tangent(t, y, threshold: float, start: int = 0) -> int | None:
-    """Onset of a rising |y| (T,): first index ≥ ``start`` where |y − y[start]| exceeds
-    ``threshold``, moved back along the tangent at that point to where it meets the
-    starting level (the classic tangent method). ``None`` if never exceeded."""
-    y = np.asarray(y, float)
-    t = np.asarray(t, float)
-    if start >= len(y) - 1:
-        return None
-    dev = np.abs(y[start:] - y[start])
-    hit = np.flatnonzero(dev > threshold)
-    if not hit.size:
-        return None
-    i = start + int(hit[0])
-    lo, hi = max(start, i - 10), min(len(y) - 1, i + 10)
-    slope = (dev[hi - start] - dev[lo - start]) / max(t[hi] - t[lo], 1e-9)
-    if slope <= 0:
-        return i
-    t_on = t[i] - dev[i - start] / slope
-    return int(np.clip(np.searchsorted(t, t_on), start, i))
-
-
 def first_drop(signal, start: int, fraction: float, window: int, noise_k: float = 8.0,
                largest: bool = False) -> int | None:
     """Onset of the first sudden fall of ``signal`` (T,) at or after ``start``: the frame of its
-    steepest descent within the first window of ``window`` frames over which it falls by more
-    than max(``fraction`` × its range after ``start``, ``noise_k`` × its noise). The noise is
+    steepest descent over the fall — the frames from which it falls within ``window`` frames by
+    more than max(``fraction`` × its range after ``start``, ``noise_k`` × its noise), and a
+    window on (a non-causal smoother leads a step by a gentle decline that may pass the
+    threshold first). The noise is
     the robust std (MAD) of the signal about its running median over ``window`` frames, so
     slow trends do not count and coloured (smoothed) noise is not underestimated. ``None`` if
     it never falls so fast. ``largest``: the deepest such fall instead of the first.
@@ -200,9 +181,7 @@ def first_drop(signal, start: int, fraction: float, window: int, noise_k: float 
     window = max(2, int(window))
     if n < window + 3:
         return None
-    from scipy.ndimage import median_filter
-    r = x - median_filter(x, size=window | 1, mode="nearest")
-    noise = 1.4826 * float(np.median(np.abs(r - np.median(r))))
+    noise = robust_noise(x, window)
     thr = max(fraction * float(np.ptp(x)), noise_k * noise)
     if thr <= 0:
         return None
@@ -216,29 +195,81 @@ def first_drop(signal, start: int, fraction: float, window: int, noise_k: float 
     i = int(hit[np.argmax(fall[hit])]) if largest else int(hit[0])
     if largest:
         i = max(0, i - window)
-    j = min(n - 1, i + 2 * window if largest else i + window)
+        j = min(n - 1, i + 2 * window)
+    else:
+        # the fall's own extent: every frame from which it still falls so fast, and a window
+        # on (a smoothed fall may pass the threshold well ahead of its steepest step)
+        e = i
+        while e + 1 < n and fall[e + 1] > thr:
+            e += 1
+        j = min(n - 1, e + window)
     steep = i + int(np.argmin(np.diff(x[i:j + 1])))
     return start + steep + 1
 
 
-def rise_start(y, threshold: float, start: int = 0, frac: float = 0.1) -> int | None:
-    """Start of the rise of |y − y[start]| past ``threshold``: from the first crossing, walk back
-    while the signal still moves (towards the crossing) faster than ``frac`` × its steepest
-    slope since ``start``. Unlike the tangent, a sharp rise that then levels off is dated to
-    where it begins. ``None`` if never exceeded."""
-    y = np.asarray(y, float)
-    if start >= len(y) - 1:
+def robust_noise(signal, window: int) -> float:
+    """Robust std (MAD × 1.4826) of ``signal`` (T,) about its running median over ``window``
+    frames: the noise without the slow trends (and without underestimating smoothed,
+    coloured noise)."""
+    from scipy.ndimage import median_filter
+    x = np.asarray(signal, float)
+    r = x - median_filter(x, size=max(2, int(window)) | 1, mode="nearest")
+    return 1.4826 * float(np.median(np.abs(r - np.median(r))))
+
+
+def largest_change(signal, start: int, stop: int, window: int, noise_k: float = 6.0) -> tuple[int, float] | None:
+    """The steepest frame of the largest sudden change of ``signal`` (T,) in ``[start, stop)``:
+    the window of ``window`` frames over which it changes most (either way) must change by
+    more than ``noise_k`` × the noise of such changes (the robust std, MAD × 1.4826, of the
+    changes over every window there: a smoothed, wandering signal's noise is measured as
+    what the test reads); within it, the frame of the steepest step that way. Returns
+    (frame, sign of the change: +1 rise, −1 fall), or ``None`` when nothing there stands out
+    of the noise. Scale-free: only ratios to the signal's own changes decide."""
+    x = np.asarray(signal, float)[start:stop]
+    window = max(2, int(window))
+    if len(x) < 2 * window + 3:
         return None
-    hit = np.flatnonzero(np.abs(y[start:] - y[start]) > threshold)
-    if not hit.size:
+    change = x[window:] - x[:-window]
+    noise = 1.4826 * float(np.median(np.abs(change - np.median(change))))
+    i = int(np.argmax(np.abs(change)))
+    if not abs(change[i]) > noise_k * noise:
         return None
-    i = start + int(hit[0])
-    if i <= start:
-        return i
-    sgn = 1.0 if y[i] >= y[start] else -1.0
-    d = sgn * np.diff(y[start:i + 1])              # d[k]: y[start+k+1] − y[start+k]
-    steep = float(d.max())
-    k = len(d)
-    while k > 0 and d[k - 1] > frac * steep:
-        k -= 1
-    return start + k
+    sign = 1.0 if change[i] > 0 else -1.0
+    steep = i + int(np.argmax(sign * np.diff(x[i:i + window + 1])))
+    return start + steep, sign
+
+
+def knee(t, y, lo: int, hi: int) -> int:
+    """Frame of the knee of ``y`` (T,) over ``[lo, hi]``: the break of the best continuous
+    two-line fit (least squares over every break frame), i.e. where a level or slow drift
+    turns into a rise or fall. Independent of the signal's scale and offset; ``hi`` is meant
+    to be the steepest frame of the change, so the second line is its leading flank."""
+    t = np.asarray(t, float)[lo:hi + 1]
+    y = np.asarray(y, float)[lo:hi + 1]
+    n = len(y)
+    if n < 5:
+        return lo
+    tt = t - t[0]
+    best, best_k = np.inf, 0
+    for k in range(1, n - 2):
+        # y ≈ c + s1·(t − t_k) + (s2 − s1)·max(0, t − t_k)
+        A = np.column_stack([np.ones(n), tt - tt[k], np.maximum(0.0, tt - tt[k])])
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        sse = float(np.sum((A @ coef - y) ** 2))
+        if sse < best:
+            best, best_k = sse, k
+    return lo + best_k
+
+
+def edge_crossing(signal, edge: int, lo: int, before: int, after_level: float, level: float) -> int:
+    """Where a fall of ``signal`` (T,) whose steepest frame is ``edge`` passes ``level`` of its
+    own depth: from its level just before (the median over ``before`` frames ending
+    ``before // 2`` frames ahead of ``edge``, not before ``lo``) down to ``after_level``. The
+    first frame at or after which the signal stays below that level, up to ``edge``."""
+    x = np.asarray(signal, float)
+    a = max(lo, edge - before - before // 2)
+    b = max(a + 1, edge - before // 2)
+    pre = float(np.median(x[a:b]))
+    lev = after_level + level * (pre - after_level)
+    above = np.flatnonzero(x[lo:edge + 1] >= lev)
+    return lo + int(above[-1]) + 1 if above.size else lo

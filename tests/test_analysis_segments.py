@@ -74,25 +74,96 @@ def test_sweep_labels_cover_each_bump():
         assert s.start < s.stop
 
 
-def test_onset_by_tangent_on_a_ramp():
+def test_knee_of_a_ramp_after_a_drift():
     t = np.arange(1000) / RATE
-    y = np.clip(t - 4.0, 0, None) * 0.1                       # starts rising at 4 s
-    i = seg.onset_by_tangent(t, y, 0.05, start=0)
-    assert abs(t[i] - 4.0) < 0.05
+    y = 0.3 - 0.01 * t + np.clip(t - 4.0, 0, None) * 0.1     # a slow drift, a rise from 4 s
+    for scale in (1.0, 0.01, 100.0):
+        i = seg.knee(t, scale * y + 7.0, 200, 600)
+        assert abs(t[i] - 4.0) < 0.02
 
 
-def test_pour_phases_from_a_made_up_grasp():
+def turn(t, onset_s, amplitude, noise, seed=0, drift=0.0):
+    """A static-flow rotation as the pipeline reads it: a torsional breakaway at ``onset_s``
+    (turns quickly, then levels), a slow drift, white noise, smoothed over 0.5 s."""
+    rng = np.random.default_rng(seed)
+    raw = amplitude * np.where(t > onset_s, 1 - np.exp(-np.clip(t - onset_s, 0, None) / 0.25), 0.0)
+    return seg.smooth(raw + drift * t + rng.normal(0, noise, len(t)), RATE, 0.5)
+
+
+@pytest.mark.parametrize("amplitude", [0.02, 0.005, -0.004])
+def test_largest_change_and_its_knee_date_a_turn_at_any_scale(amplitude):
+    """The rotation phase's reading: a quarter of the turn (the sensor's shear gain 3 instead
+    of 12) is dated as well; the absolute threshold it replaces (0.015 rad) never saw it."""
     t = np.arange(4000) / RATE
-    p = np.where((t > 1) & (t < 35), 4 + 0.05 * (t - 1), 0.0)
-    p = np.where((t > 20) & (t < 35), p.max() - 0.02 * (t - 20) * 0 - 0.05 * (t - 20), p)
-    rot = np.where(t > 12, 0.02 * (t - 12), 0.0)
-    ph = labelling.pour_phases(t, p, (101, 3500), 110, rot, 200, 0.03, 0.15, 50)
+    y = turn(t, 12.0, amplitude, 0.0004, drift=-0.0004)
+    steep, sign = seg.largest_change(y, 250, 3400, 50)
+    assert sign == np.sign(amplitude)
+    assert abs(t[seg.knee(t, y, steep - 100, steep)] - 12.0) < 0.1
+
+
+def test_largest_change_is_none_in_noise_and_drift():
+    t = np.arange(4000) / RATE
+    for seed in range(5):
+        y = turn(t, 12.0, 0.0, 0.0004, seed=seed, drift=-0.0004)
+        assert seg.largest_change(y, 250, 3400, 50) is None
+
+
+def test_edge_crossing_reads_a_fall_by_its_own_depth():
+    t = np.arange(3000) / RATE
+    x = np.where(t < 20.0, 1.0 - 0.1 * t, -8.0)                 # sinks, then falls at 20 s to −8
+    x = seg.smooth(x, RATE, 0.05)
+    edge = int(np.argmin(np.diff(x)))
+    i = seg.edge_crossing(x, edge, 0, 50, -8.0, 0.5)
+    assert abs(t[i] - 20.0) < 0.03
+    assert abs(t[seg.edge_crossing(7 * x + 3, edge, 0, 50, -53.0, 0.5)] - 20.0) < 0.03
+
+
+def test_first_drop_dates_a_fall_that_a_smoother_led_by_its_steepest_step():
+    """A non-causal smoother (the activation's RTS pass) starts a sudden fall early: a gentle
+    decline ahead of the step. The fall is dated at its steepest step, however early the
+    decline first passes the threshold."""
+    t = np.arange(3000) / RATE
+    x = 3.0 - 0.6 * np.clip((t - 9.4) / 0.6, 0, 1)                       # the smoother's lead
+    x = x - 1.0 * np.clip((t - 10.0) / 0.03, 0, 1) * np.exp(-np.clip(t - 10.03, 0, None) / 0.3)
+    x = x + np.random.default_rng(2).normal(0, 0.005, len(t))
+    for fraction in (0.15, 0.05):
+        i = seg.first_drop(x, 200, fraction, 50)
+        assert abs(t[i] - 10.0) < 0.04, (fraction, t[i])
+
+
+def made_up_grasp(gain):
+    """A pour as the pads read it at a shear gain ``gain`` (12: the simulator's former
+    default, 3: what real BioTac SP frames allow): the pad pressure sinks with the shear term
+    as the load grows, dips when the bottle first gives at 8 s, breaks away at 20 s (the
+    downward slide) and falls at 35 s (full slip); the static-flow rotation turns
+    (0.0016 × gain rad) at 12 s."""
+    t = np.arange(4000) / RATE
+    g = gain / 12.0
+    p = np.where((t > 1) & (t < 35), 4 + 0.05 * (t - 1) - (1 - g) * 0.15 * (t - 1), 0.0)
+    p = np.where((t > 8) & (t < 35), p - 0.8 * np.exp(-np.clip(t - 8, 0, None) / 0.3), p)
+    p = np.where((t > 20) & (t < 35), p - 1.0, p)
+    rot = turn(t, 12.0, 0.02 * g, 0.0003, drift=-0.0003)
+    p = p + np.random.default_rng(1).normal(0, 0.01, len(t))   # the pad's noise
+    return t, seg.smooth(p, RATE, 0.05), rot
+
+
+@pytest.mark.parametrize("gain", [12, 6, 3])
+def test_pour_phases_from_a_made_up_grasp(gain):
+    t, p, rot = made_up_grasp(gain)
+    ph = labelling.pour_phases(t, p, (101, 3500), 110, rot, 200, 6.0, 0.15, 50)
     on = {k: (None if v is None else t[v]) for k, v in ph.onsets.items()}
     assert on["pour"] == pytest.approx(2.0)
     assert on["rotation"] == pytest.approx(12.0, abs=0.1)
     assert on["downward"] == pytest.approx(20.0, abs=0.05)
     assert on["full_slip"] == pytest.approx(35.0, abs=0.05)
-    assert on["initial_slip"] is None and "trough" in ph.reasons["initial_slip"]
+    assert on["initial_slip"] == pytest.approx(8.0, abs=0.05)
+
+
+def test_pour_without_a_turn_says_why():
+    t, p, _ = made_up_grasp(12)
+    rot = turn(t, 12.0, 0.0, 0.0003, drift=-0.0003)
+    ph = labelling.pour_phases(t, p, (101, 3500), 110, rot, 200, 6.0, 0.15, 50)
+    assert ph.onsets["rotation"] is None and "noise" in ph.reasons["rotation"]
 
 
 def test_config_errors_name_the_key():
