@@ -65,6 +65,10 @@ in one line, with the finger-hours observed.
     TACTILE_CACHE_DIR=/tmp/tcache python benchmarks/bench_slip.py [--jobs 2] [--pours N]
         [--flexions 1.08 1.10 1.14] [--rates 100 150] [--seeds 0 1] [--plain]
         [--sweeps-seeds 0 1 2] [--grip-seconds 60] [--grip-flexions 1.10 1.14]
+        [--override hardware.sensor.shear_kohm_per_n=3 ...]
+
+``--override`` adds Hydra overrides to every simulated run (the shear gain of the sensor
+model, above: the figures at a realistic gain, ``docs/live.md``).
 """
 
 from __future__ import annotations
@@ -94,6 +98,13 @@ ROOT = Path(__file__).resolve().parents[1]
 CONF_DIR = ROOT / "conf"
 BAG = ROOT / "tests" / "data" / "biotac_rest_untouched.bag"
 QUIET = ("progress=false", "analyze=false")
+EXTRA: tuple[str, ...] = ()                     # --override: Hydra overrides added to every run
+
+
+def _set_extra(overrides) -> None:
+    """Set :data:`EXTRA` (in the main process and in each worker, as their initializer)."""
+    global EXTRA
+    EXTRA = tuple(overrides)
 EPISODE_GAP_S = 0.5
 TARGET_MS = 50.0
 MARGINS = ("release", "creep", "rotation")
@@ -169,7 +180,7 @@ def compose(*overrides):
     from tactile_flow.protocols.schema import register
     register()
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base=None):
-        return hcompose("config", overrides=list(overrides))
+        return hcompose("config", overrides=list(overrides) + list(EXTRA))
 
 
 def run(cfg):
@@ -401,7 +412,10 @@ def main():
     ap.add_argument("--grip-seconds", type=float, default=60.0, help="steady grip hold (0: none)")
     ap.add_argument("--grip-flexions", type=float, nargs="*", default=[1.10, 1.14], help="steady grips, rad")
     ap.add_argument("--jobs", type=int, default=2, help="simulated runs in parallel")
+    ap.add_argument("--override", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="Hydra overrides for every simulated run, e.g. hardware.sensor.shear_kohm_per_n=3")
     args = ap.parse_args()
+    _set_extra(args.override)
     if max(args.rates) > 150:
         ap.error("--rates: the pump's limit is 150 ml/min")
     t_start = time.perf_counter()
@@ -438,7 +452,8 @@ def main():
         if k[0].startswith("pour"):
             return 15.0 + 2500.0 * (k[1] - 1.0) / k[2] * (4.0 if k[0] == "pour_grasp" else 1.0)
         return 15.0
-    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=mp.get_context("spawn")) as pool:
+    with ProcessPoolExecutor(max_workers=args.jobs, mp_context=mp.get_context("spawn"),
+                             initializer=_set_extra, initargs=(args.override,)) as pool:
         futures = {}
         for k in sorted(jobs, key=expected_s, reverse=True):
             fn, a = jobs[k]

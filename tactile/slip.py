@@ -12,8 +12,15 @@ steady contact for ``settle_s``):
     by more than ``release_drop`` of its value *and* by more than ``release_noise`` times the
     finger's own noise over that many frames (an EMA, ``noise_tau_s``, of the per-frame
     relative change's absolute deviation from the trend, × √frames: a light contact is
-    noisier, relatively, than a firm one), while at least ``release_confidence`` of the
-    footprint moves (the flow confidence, in any view, in one of those frames). The trend
+    noisier, relatively, than a firm one), while the footprint moves in one of those frames,
+    in some view: at least ``release_confidence`` of it above the flow's noise level (the
+    flow confidence), *or* its mean flow at least ``release_motion`` times the finger's own
+    usual mean-flow magnitude (an EMA with ``noise_tau_s``, taken before the frame). The
+    second form is relative to the finger's own flow, so it does not depend on how strongly
+    the skin's stretch shows in the electrodes: with a weak shear response (a real BioTac SP
+    shows about a quarter of the simulator's default; ``docs/simulator.md``) a release moves
+    every pixel by less than the analysis's absolute noise level (0.05 px/frame) and the
+    confidence stays 0, while the mean flow still jumps 3-5× above its own level. The trend
     term is what keeps a finger that is sliding off a feature, or being lifted, from firing:
     its pressure falls too, but steadily.
 ``creep``
@@ -43,7 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SlipConfig", "SlipDetector", "SlipState"]
+__all__ = ["SlipConfig", "SlipDetector", "SlipState", "release_motion"]
 
 CAUSES = ("", "release", "creep", "rotation")
 """Codes of :attr:`SlipState.cause`: 0 none, 1 release, 2 creep, 3 rotation."""
@@ -61,6 +68,7 @@ class SlipConfig:
     release_frames: int = 3            # frames over which the fall is summed [1]
     release_confidence: float = 0.2    # fraction of the footprint moving in one of them [1]
     release_noise: float = 10.0        # ... and that many times the finger's relative noise [1]
+    release_motion: float = 3.0        # ... or mean flow this many times its own usual level [1]
     trend_tau_s: float = 0.1           # time constant of the pressure trend [s]
     noise_tau_s: float = 1.0           # time constant of the noise estimate [s]
     creep_px: float = 0.01             # smoothed mean-flow magnitude [px/frame]
@@ -107,6 +115,26 @@ class SlipState:
         return self.first is not None
 
 
+def release_motion(magnitude, level, factor: float) -> float:
+    """How far the mean flow stands out of its own usual level, over the threshold.
+
+    Args:
+        magnitude: (V,) this frame's mean-flow magnitude per view [px/frame].
+        level: (V,) the finger's usual magnitude before this frame (an EMA) [px/frame];
+            NaN where there is none yet.
+        factor: ``release_motion``, the multiple of the level that counts as moving [1].
+
+    Returns:
+        max over views of magnitude / (factor × level); ≥ 1: the footprint moves. 0 where
+        there is no level yet (a finger's first frame) or the level is 0 (nothing to be
+        relative to: a noiseless, still stream never moves by this criterion).
+    """
+    ok = np.isfinite(level) & (level > 0)
+    if not ok.any():
+        return 0.0
+    return float((magnitude[ok] / (factor * level[ok])).max())
+
+
 class SlipDetector:
     """Per-finger slip detector over a stream of online flow aggregates.
 
@@ -127,7 +155,8 @@ class SlipDetector:
         self._trend = np.zeros(F)
         self._noise = np.zeros(F)                 # EMA of |relative change − trend|
         self._excess = np.zeros((F, int(config.release_frames)))   # recent falls beyond the trend
-        self._moved = np.zeros((F, int(config.release_frames)))    # and the confidence then
+        self._moved = np.zeros((F, int(config.release_frames)))    # and how much it moved then (≥ 1: moving)
+        self._level = None                        # (F, V) EMA of the mean flow's magnitude (NaN: none yet)
         self._slot = np.zeros(F, np.int64)
         self._contact_since = np.full(F, np.nan)
         self._flow = None                         # (F, V, 2) EMA of the mean flow vector
@@ -148,6 +177,7 @@ class SlipDetector:
         self._moved[finger] = 0.0
         self._contact_since[finger] = np.nan
         if self._flow is not None:
+            self._level[finger] = np.nan
             self._flow[finger] = 0.0
             self._length[finger] = 0.0
             self._curl[finger] = 0.0
@@ -171,6 +201,7 @@ class SlipDetector:
             self._flow = np.zeros(mean.shape)
             self._length = np.zeros(mean.shape[:2])
             self._curl = np.zeros(mean.shape[:2])
+            self._level = np.full(mean.shape[:2], np.nan)
         s = self.state
         s.t = float(t)
         s.fired[:] = False
@@ -202,6 +233,11 @@ class SlipDetector:
         self._flow[f] += a_flow * (mean - self._flow[f])
         self._length[f] += a_flow * (np.hypot(mean[:, 0], mean[:, 1]) - self._length[f])
         self._curl[f] += a_flow * (curl - self._curl[f])
+        a_noise = 1.0 - math.exp(-dt / c.noise_tau_s)
+        magnitude = np.hypot(mean[:, 0], mean[:, 1])
+        level = self._level[f]
+        motion = release_motion(magnitude, level, c.release_motion)   # against the level before this frame
+        self._level[f] = np.where(np.isnan(level), magnitude, level + a_noise * (magnitude - level))
         settled = t - self._contact_since[f] >= c.settle_s            # NaN (no contact) compares False
         if total < c.contact_kohm:
             self._contact_since[f] = np.nan
@@ -214,12 +250,12 @@ class SlipDetector:
         drop = (prev - total) / max(prev, c.contact_kohm)           # relative fall this frame
         trend, noise = self._trend[f], self._noise[f]
         self._trend[f] += a_trend * (drop - trend)
-        self._noise[f] += (1.0 - math.exp(-dt / c.noise_tau_s)) * (abs(drop - trend) - noise)
+        self._noise[f] += a_noise * (abs(drop - trend) - noise)
         k = self._slot[f] = (self._slot[f] + 1) % self._excess.shape[1]
         self._excess[f, k] = drop - max(trend, 0.0)
-        self._moved[f, k] = confidence.max()
+        self._moved[f, k] = max(confidence.max() / c.release_confidence, motion)
         # each criterion's statistic over its threshold: ≥ 1 fires (see the module docstring)
-        if self._moved[f].max() >= c.release_confidence:
+        if self._moved[f].max() >= 1.0:
             frames = self._excess.shape[1]
             ratios[0] = self._excess[f].sum() / max(c.release_drop, c.release_noise * noise * math.sqrt(frames))
         speed = np.hypot(self._flow[f, :, 0], self._flow[f, :, 1])

@@ -136,3 +136,47 @@ def test_a_light_noisy_contact_needs_a_drop_well_above_its_own_noise():
     assert feed(SlipDetector(1), total, confidence=conf) == []
     total[300:] *= 0.55                                      # a 45 % release: slip
     assert feed(SlipDetector(1), total, confidence=conf)[0][:2] == (3.0, 0)
+
+
+def _release_with_faint_flow(level=0.003, jump=4.0, T=200, at=120):
+    """A grip whose release moves the skin too little for the absolute confidence (0 in
+    every frame): the mean flow, noise around ``level`` px/frame, jumps ``jump`` × at the
+    release — what the thumb's live flow shows at a realistic shear gain (3 kΩ/N)."""
+    rng = np.random.default_rng(2)
+    total = grip(T)
+    total[at:] *= 0.78
+    speed = level * (1 + 0.5 * rng.standard_normal(T)).clip(0.1)
+    speed[at:at + 2] = jump * level
+    mean = np.zeros((T, 1, 1, 2))
+    mean[:, 0, 0, 0] = speed
+    return total, mean
+
+
+def test_a_release_whose_flow_stands_out_of_its_own_level_fires_without_confidence():
+    total, mean = _release_with_faint_flow()
+    assert feed(SlipDetector(1), total, mean=mean)[0] == (1.2, 0, "release")
+    # the same fall with the flow at its usual level is not a release: nothing moved
+    _, still = _release_with_faint_flow(jump=1.0)
+    assert feed(SlipDetector(1), total, mean=still) == []
+    # the criterion is relative: the same release at a tenth of the flow's scale fires alike
+    total, mean = _release_with_faint_flow(level=0.0003)
+    assert feed(SlipDetector(1), total, mean=mean)[0] == (1.2, 0, "release")
+
+
+def test_release_motion_is_the_flow_over_its_own_level():
+    from tactile_flow.tactile.slip import release_motion
+
+    assert release_motion(np.array([0.012, 0.001]), np.array([0.003, 0.002]), 3.0) == pytest.approx(4 / 3)
+    assert release_motion(np.array([0.5]), np.array([np.nan]), 3.0) == 0.0     # no level yet
+    assert release_motion(np.array([0.5]), np.array([0.0]), 3.0) == 0.0       # a noiseless, still stream
+
+
+def test_flow_noise_with_a_pressure_wobble_is_not_a_release():
+    """A still grasp: the flow's own fluctuations (up to ~3.6× its mean in the simulated
+    pours) with the pressure's noise never fire; a drop needs both."""
+    rng = np.random.default_rng(4)
+    T = 3000
+    total = grip(T, rng=rng)
+    mean = np.zeros((T, 1, 1, 2))
+    mean[:, 0, 0, 0] = 0.003 * np.abs(rng.standard_normal(T))
+    assert feed(SlipDetector(1), total, mean=mean) == []
