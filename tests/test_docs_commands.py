@@ -306,6 +306,8 @@ TESTED: dict[str, object] = {
                 "composed and planned (a 60 s run; its figures in docs/analysis.md, measured by hand)"),
     'tactile-run protocol=pour_grasp_reactive':
         "tests/test_first_hour.py::test_a_reactive_pour_does_not_count_phases_it_never_reached_as_skipped",
+    'tactile-run protocol=pour_grasp_reactive hardware.sensor.shear_kohm_per_n=3 hardware.seed=1':
+        "tests/test_reactive.py::test_at_a_realistic_shear_gain_the_reflex_still_holds_the_bottle",
     'tactile-run protocol=pour_grasp_reactive live.viewer=rerun':
         "tests/test_viewer.py::test_a_reactive_pour_replays_every_stream_and_the_live_verdicts",
     'tactile-run protocol=slip_in_place protocol.motion=rotate protocol.tare=false surface=cylinder': HERE,

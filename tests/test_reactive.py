@@ -138,7 +138,7 @@ def test_at_a_realistic_shear_gain_the_reflex_still_holds_the_bottle(tmp_path):
     release moves no pixel past the flow's absolute noise level: the detector must see the
     thumb's mean flow stand out of its own level, or the bottle falls (it did: full slip at
     53.64 s)."""
-    cfg = _cfg("protocol=pour_grasp_reactive", "hardware.sensor.shear_kohm_per_n=3", *QUIET)
+    cfg = _cfg("protocol=pour_grasp_reactive", "hardware.sensor.shear_kohm_per_n=3", "hardware.seed=1", *QUIET)
     result = run_protocol(cfg, tmp_path / "run", console=lambda *a: None)
     assert result.status == "success", result.error
     tree = xr.open_datatree(result.store, engine="zarr")
