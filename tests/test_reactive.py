@@ -212,8 +212,9 @@ def test_no_false_alarm_on_a_simulated_sweep(tmp_path, gain):
     assert np.nanmax(live.confidence.values[:, ff]) > 0.5
 
 
-def test_corrupt_and_missing_frames_are_skipped_and_counted_never_taken_for_slip(tmp_path):
-    cfg = _cfg("protocol=pour_grasp_reactive", "hardware.seed=3", *QUIET,
+@pytest.mark.parametrize("gain", [12, 3])
+def test_corrupt_and_missing_frames_are_skipped_and_counted_never_taken_for_slip(tmp_path, gain):
+    cfg = _cfg("protocol=pour_grasp_reactive", "hardware.seed=3", f"hardware.sensor.shear_kohm_per_n={gain}", *QUIET,
                "hardware.faults.biotac_dropout=[[8.0,8.2]]", "hardware.faults.biotac_corrupt=[12.0,12.5,13.0]")
     result = run_protocol(cfg, tmp_path / "run", console=lambda *a: None)
     assert result.status == "success", result.error
