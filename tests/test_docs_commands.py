@@ -131,6 +131,7 @@ TESTED: dict[str, object] = {
     'python benchmarks/bench_sim.py': BENCH,
     'python benchmarks/bench_sim_vs_real.py': BENCH,
     'python benchmarks/bench_slip.py': BENCH,
+    'python benchmarks/bench_slip.py --override hardware.sensor.shear_kohm_per_n=3': BENCH,
     'python benchmarks/bench_reflex.py': BENCH,
     'python benchmarks/bench_slip_direction.py': BENCH,
     'python benchmarks/bench_slip_direction.py --grid classic': BENCH,
