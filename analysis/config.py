@@ -62,6 +62,9 @@ class Estimates:
 class Pour:
     rotation_noise_k: float = spec(6.0, gt=0)
     trough_prominence: float = 0.15
+    # retired in 0.3 (the rotation phase is read relative to the turn's own noise): accepted so
+    # that a run recorded before re-runs (`tactile-runs reproduce`), and ignored, with a note
+    rotation_rad: float | None = None
 
 
 @dataclass(frozen=True)

@@ -119,6 +119,9 @@ def analyze_run(store_path, analysis_cfg=None, *, name: str | None = None, force
     if not cfg.enabled:
         console(f"analysis: disabled (analysis.enabled=false); {store_path} not analysed")
         return {"headline": {"status": "disabled"}}
+    if cfg.pour.rotation_rad is not None:
+        console("analysis: analysis.pour.rotation_rad is retired and ignored (since 0.3 the rotation phase "
+                "is read by analysis.pour.rotation_noise_k)")
     if not packed.is_store(store_path):
         return _analyse_and_write(store_path, cfg, console, name, force, sensor)    # load_run says what is wrong
     run_dir = store_path.parent

@@ -219,3 +219,25 @@ def test_a_run_recorded_before_0_2_reproduces_from_its_overrides(tmp_path):
     hydra_yaml.write_text(hydra_yaml.read_text().replace("tactile_flow.protocols.cli", "protocols.cli"))
     again = tactile_runs("reproduce", "run", "--out", "again", "--allow-code-change", cwd=tmp_path)
     assert again.returncode == 0 and "reproduced: identical" in again.stdout, (again.stdout, again.stderr)
+
+
+def test_a_run_recorded_with_a_retired_analysis_key_reproduces_and_says_it_is_ignored(tmp_path):
+    """``analysis.pour.rotation_rad`` (retired in 0.3) in a run's recorded config: the run is
+    done again (with --allow-code-change, as any run of older code), the key named as ignored."""
+    rec = tactile_run(*QUIET, "hydra.run.dir=run", cwd=tmp_path)
+    assert rec.returncode == 0, rec.stderr
+    recorded = tmp_path / "run" / "config" / "main" / "analysis" / "default.yaml"
+    text = recorded.read_text()
+    assert "rotation_noise_k: 6.0" in text
+    recorded.write_text(text.replace("rotation_noise_k: 6.0", "rotation_rad: 0.015"))
+    info = json.loads((tmp_path / "run" / "run.json").read_text())      # as 0.2 recorded it
+    for f in info["inputs"]["files"]:
+        if f["copy"].endswith("analysis/default.yaml"):
+            f["sha256"] = repro._sha256(recorded)
+    pour = info["config"]["analysis"]["pour"]
+    pour["rotation_rad"] = 0.015
+    del pour["rotation_noise_k"]
+    (tmp_path / "run" / "run.json").write_text(json.dumps(info))
+    again = tactile_runs("reproduce", "run", "--out", "again", "--allow-code-change", cwd=tmp_path)
+    assert again.returncode == 0 and "reproduced: identical" in again.stdout, (again.stdout, again.stderr)
+    assert "analysis.pour.rotation_rad is retired and ignored" in again.stdout + again.stderr
