@@ -680,13 +680,16 @@ class FigureWriter:
         The workers are the children started since the pool was made: one an interrupt caught
         between its start and the pool's bookkeeping counts too. SIGKILL, not SIGTERM: a worker
         forked a moment ago may not have set its handlers yet (it would print a traceback)."""
-        workers = [p for p in multiprocessing.active_children() if p not in self._others]
         if self.pool is not None:
             self.pool.shutdown(wait=False, cancel_futures=True)
-        for process in workers:
-            process.kill()
-        for process in workers:
-            process.join()
+        for _ in range(5):                       # the children listed again until none is left: a
+            workers = [p for p in multiprocessing.active_children() if p not in self._others]
+            if not workers:                      # worker still being started when first listed
+                break                            # was seen left behind (1 run in 7)
+            for process in workers:
+                process.kill()
+            for process in workers:
+                process.join()
 
 
 def _draw_job(i: int, out_dir: Path) -> None:
