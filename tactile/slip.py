@@ -7,18 +7,21 @@ steady contact for ``settle_s``):
 ``release``
     the stick-slip release when the object first gives: the skin's stored stretch and part
     of the normal load are let go *at once*, so the total activation (the sum of the 24
-    filtered taxel activations, a PDC proxy) falls within ``release_frames`` frames, beyond
-    its recent falling trend (an EMA of the per-frame relative change with ``trend_tau_s``),
-    by more than ``release_drop`` of its value *and* by more than ``release_noise`` times the
-    finger's own noise over that many frames (an EMA, ``noise_tau_s``, of the per-frame
-    relative change's absolute deviation from the trend, × √frames: a light contact is
-    noisier, relatively, than a firm one), while the footprint moves in one of those frames,
-    in some view: at least ``release_confidence`` of it above the flow's noise level (the
-    flow confidence), *or* its mean flow at least ``release_motion`` times the finger's own
-    usual mean-flow magnitude (an EMA with ``noise_tau_s``, taken before the frame). The
-    second form is relative to the finger's own flow, so it does not depend on how strongly
-    the skin's stretch shows in the electrodes: with a weak shear response (a real BioTac SP
-    shows about a quarter of the simulator's default; ``docs/simulator.md``) a release moves
+    filtered taxel activations, a PDC proxy) falls over ``release_frames`` frames by more
+    than its drift before them explains (the trend, an EMA of the per-frame relative change
+    with ``trend_tau_s``, as it was before the window: :func:`release_fall`), by more than
+    ``release_drop`` of its value *and* by more than ``release_noise`` times that same
+    n-frame fall's own usual size on this finger (an EMA, ``noise_tau_s``, of its absolute
+    value: :func:`release_ratio`; the filtered activation's noise is correlated from frame
+    to frame, so it is measured over the window, not scaled from one frame: a light contact
+    is noisier, relatively, than a firm one, and its give is judged against its own noise),
+    while the footprint moves in one of those frames, in some view: at least
+    ``release_confidence`` of it above the flow's noise level (the flow confidence), *or*
+    its mean flow at least ``release_motion`` times the finger's own usual mean-flow
+    magnitude (an EMA with ``noise_tau_s``, taken before the frame). The second form is
+    relative to the finger's own flow, so it does not depend on how strongly the skin's
+    stretch shows in the electrodes: with a weak shear response (a real BioTac SP shows
+    about a quarter of the simulator's default; ``docs/simulator.md``) a release moves
     every pixel by less than the analysis's absolute noise level (0.05 px/frame) and the
     confidence stays 0, while the mean flow still jumps 3-5× above its own level. The trend
     term is what keeps a finger that is sliding off a feature, or being lifted, from firing:
@@ -50,7 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SlipConfig", "SlipDetector", "SlipState", "release_motion"]
+__all__ = ["SlipConfig", "SlipDetector", "SlipState", "release_fall", "release_motion", "release_ratio"]
 
 CAUSES = ("", "release", "creep", "rotation")
 """Codes of :attr:`SlipState.cause`: 0 none, 1 release, 2 creep, 3 rotation."""
@@ -65,10 +68,10 @@ class SlipConfig:
     contact_kohm: float = 0.5          # total activation that counts as contact [kΩ]
     settle_s: float = 0.5              # contact held this long before a slip can be declared [s]
     release_drop: float = 0.1          # one-frame relative fall of the total activation [1]
-    release_frames: int = 3            # frames over which the fall is summed [1]
+    release_frames: int = 4            # frames over which the fall is measured [1]
     release_confidence: float = 0.2    # fraction of the footprint moving in one of them [1]
-    release_noise: float = 10.0        # ... and that many times the finger's relative noise [1]
-    release_motion: float = 3.0        # ... or mean flow this many times its own usual level [1]
+    release_noise: float = 7.0         # ... and that many times that fall's own noise [1]
+    release_motion: float = 2.5        # ... or mean flow this many times its own usual level [1]
     trend_tau_s: float = 0.1           # time constant of the pressure trend [s]
     noise_tau_s: float = 1.0           # time constant of the noise estimate [s]
     creep_px: float = 0.01             # smoothed mean-flow magnitude [px/frame]
@@ -135,6 +138,45 @@ def release_motion(magnitude, level, factor: float) -> float:
     return float((magnitude[ok] / (factor * level[ok])).max())
 
 
+def release_fall(before: float, total: float, trend_before: float, frames: int, contact_kohm: float) -> float:
+    """The total activation's fall over ``frames`` frames beyond the trend it had before them.
+
+    Args:
+        before: the total activation ``frames`` frames ago [kΩ] (NaN: not yet seen).
+        total: this frame's [kΩ].
+        trend_before: the per-frame relative fall's trend (an EMA) as it was before the
+            window [1/frame]; a rising trend (negative) counts as 0.
+        frames: n, the window [frames].
+        contact_kohm: the floor of the reference (a fall is relative to at least this) [kΩ].
+
+    Returns:
+        (before − total) / max(before, contact_kohm) − n × max(trend_before, 0) [1]: how much
+        more than its drift the contact let go in the window; NaN before the window is full.
+    """
+    if not math.isfinite(before):
+        return math.nan
+    return (before - total) / max(before, contact_kohm) - frames * max(trend_before, 0.0)
+
+
+def release_ratio(excess: float, noise: float, drop: float, factor: float) -> float:
+    """The release statistic over its threshold: ≥ 1 fires.
+
+    Args:
+        excess: :func:`release_fall` of this frame [1].
+        noise: the same quantity's own usual size before this frame (an EMA of its absolute
+            value, ``noise_tau_s``) [1].
+        drop: ``release_drop``, the smallest relative fall that counts [1].
+        factor: ``release_noise``, the multiple of the noise that counts [1].
+
+    Returns:
+        excess / max(drop, factor × noise). The noise is that of the n-frame fall itself,
+        measured on the finger's own signal, not the one-frame noise scaled by √n: the filtered
+        activation's noise is correlated from frame to frame, so its n-frame falls are not
+        √n times its one-frame ones.
+    """
+    return excess / max(drop, factor * noise)
+
+
 class SlipDetector:
     """Per-finger slip detector over a stream of online flow aggregates.
 
@@ -153,9 +195,12 @@ class SlipDetector:
         self._last_t = np.full(F, -np.inf)
         self._prev_total = np.full(F, np.nan)
         self._trend = np.zeros(F)
-        self._noise = np.zeros(F)                 # EMA of |relative change − trend|
-        self._excess = np.zeros((F, int(config.release_frames)))   # recent falls beyond the trend
-        self._moved = np.zeros((F, int(config.release_frames)))    # and how much it moved then (≥ 1: moving)
+        n = int(config.release_frames)
+        self._ring_total = np.full((F, n), np.nan)  # the last n totals [kΩ] (slot k: the frame n ago, once full)
+        self._ring_trend = np.zeros((F, n))         # the trend taken before each of them [1/frame]
+        self._noise_n = np.zeros(F)                 # EMA of |n-frame fall beyond the trend|: its own noise [1]
+        self._samples = np.zeros(F, np.int64)       # n-frame falls seen (starts the noise EMA as a mean)
+        self._moved = np.zeros((F, n))              # how much it moved in those frames (≥ 1: moving)
         self._level = None                        # (F, V) EMA of the mean flow's magnitude (NaN: none yet)
         self._slot = np.zeros(F, np.int64)
         self._contact_since = np.full(F, np.nan)
@@ -172,8 +217,10 @@ class SlipDetector:
         """Start finger ``finger`` from scratch (as after a pause in its stream)."""
         self._prev_total[finger] = np.nan
         self._trend[finger] = 0.0
-        self._noise[finger] = 0.0
-        self._excess[finger] = 0.0
+        self._ring_total[finger] = np.nan
+        self._ring_trend[finger] = 0.0
+        self._noise_n[finger] = 0.0
+        self._samples[finger] = 0
         self._moved[finger] = 0.0
         self._contact_since[finger] = np.nan
         if self._flow is not None:
@@ -248,16 +295,20 @@ class SlipDetector:
         if math.isnan(prev):
             return 0
         drop = (prev - total) / max(prev, c.contact_kohm)           # relative fall this frame
-        trend, noise = self._trend[f], self._noise[f]
+        trend = self._trend[f]
         self._trend[f] += a_trend * (drop - trend)
-        self._noise[f] += a_noise * (abs(drop - trend) - noise)
-        k = self._slot[f] = (self._slot[f] + 1) % self._excess.shape[1]
-        self._excess[f, k] = drop - max(trend, 0.0)
+        k = self._slot[f] = (self._slot[f] + 1) % self._ring_total.shape[1]
+        before, trend_before = self._ring_total[f, k], self._ring_trend[f, k]   # n frames ago
+        self._ring_total[f, k], self._ring_trend[f, k] = total, trend
         self._moved[f, k] = max(confidence.max() / c.release_confidence, motion)
+        excess = release_fall(before, total, trend_before, self._ring_total.shape[1], c.contact_kohm)
+        noise = self._noise_n[f]                                    # before this frame
+        if math.isfinite(excess):
+            self._samples[f] += 1
+            self._noise_n[f] += max(a_noise, 1.0 / self._samples[f]) * (abs(excess) - noise)
         # each criterion's statistic over its threshold: ≥ 1 fires (see the module docstring)
-        if self._moved[f].max() >= 1.0:
-            frames = self._excess.shape[1]
-            ratios[0] = self._excess[f].sum() / max(c.release_drop, c.release_noise * noise * math.sqrt(frames))
+        if self._moved[f].max() >= 1.0 and math.isfinite(excess) and self._samples[f] > 1:
+            ratios[0] = release_ratio(excess, noise, c.release_drop, c.release_noise)
         speed = np.hypot(self._flow[f, :, 0], self._flow[f, :, 1])
         persistent = speed >= c.creep_persistence * np.maximum(self._length[f], 1e-12)
         if persistent.any():

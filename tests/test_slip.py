@@ -180,3 +180,56 @@ def test_flow_noise_with_a_pressure_wobble_is_not_a_release():
     mean = np.zeros((T, 1, 1, 2))
     mean[:, 0, 0, 0] = 0.003 * np.abs(rng.standard_normal(T))
     assert feed(SlipDetector(1), total, mean=mean) == []
+
+
+def _light_contact(T=1500, at=900, fall=0.28, seed=0, release=True):
+    """A light contact as the thumb's filtered activation shows it at a realistic shear gain
+    (3 kΩ/N; the simulated pour at grip 1.08 rad): 1.5 kΩ drifting down 1.3 %/s while the
+    bottle fills, with noise correlated from frame to frame (AR(1), lag-1 correlation 0.85,
+    2.2 % of the level: what the Kalman-filtered total shows), and the mean flow noisy
+    around 0.002 px/frame. With ``release`` the contact lets go ``fall`` of its activation
+    from frame ``at``, spread over a few frames (time constant 3 frames), the flow jumping
+    3.5× for two frames. Returns (total (T, 1), mean (T, 1, 1, 2))."""
+    rng = np.random.default_rng(seed)
+    phi, sd = 0.85, 0.022
+    e = np.zeros(T)
+    for i in range(1, T):
+        e[i] = phi * e[i - 1] + sd * np.sqrt(1 - phi ** 2) * rng.standard_normal()
+    t = np.arange(T) / RATE
+    level = 1.5 * (1 - 0.013 * t)
+    if release:
+        k = np.arange(T) - at
+        level = level * np.where(k >= 0, 1 - fall * (1 - np.exp(-(k + 1) / 3.0)), 1.0)
+    speed = 0.002 * (1 + 0.5 * rng.standard_normal(T)).clip(0.1)
+    if release:
+        speed[at:at + 2] = 3.5 * 0.002
+    mean = np.zeros((T, 1, 1, 2))
+    mean[:, 0, 0, 0] = speed
+    return (level * (1 + e))[:, None], mean
+
+
+def test_a_light_contacts_release_is_judged_against_its_own_fall_noise():
+    """Issue 33: a light contact's give (28 % over ~8 frames, 3 frames' worth of it about
+    15 %) is ~10 times the noise of its own 4-frame falls but only ~0.75 of 10 × its
+    one-frame noise × √3 (its noise is correlated from frame to frame, so it does not grow
+    with √n): it fires within 40 ms, and the same contact without the give never does."""
+    for seed in range(3):
+        total, mean = _light_contact(seed=seed)
+        fired = feed(SlipDetector(1), total, mean=mean)
+        assert fired, seed
+        assert fired[0][2] == "release" and 9.0 <= fired[0][0] <= 9.04, (seed, fired[0])
+        total, mean = _light_contact(seed=seed, release=False)
+        assert feed(SlipDetector(1), total, mean=mean) == [], seed
+
+
+def test_release_fall_is_beyond_the_drift_before_the_window():
+    from tactile_flow.tactile.slip import release_fall, release_ratio
+
+    # 2.0 → 1.6 kΩ over 4 frames: 20 %; the drift before (0.5 %/frame) explains 2 % of it
+    assert release_fall(2.0, 1.6, 0.005, 4, 0.5) == pytest.approx(0.18)
+    assert release_fall(2.0, 1.6, -0.01, 4, 0.5) == pytest.approx(0.2)      # a rising trend counts as 0
+    assert release_fall(0.2, 0.1, 0.0, 4, 0.5) == pytest.approx(0.2)        # relative to at least contact_kohm
+    assert np.isnan(release_fall(np.nan, 1.6, 0.0, 4, 0.5))                  # the window not full yet
+    # over its threshold: the larger of release_drop and release_noise × the fall's own noise
+    assert release_ratio(0.18, 0.01, 0.1, 7.0) == pytest.approx(0.18 / 0.1)
+    assert release_ratio(0.18, 0.03, 0.1, 7.0) == pytest.approx(0.18 / 0.21)
