@@ -7,6 +7,8 @@ emulator thread inside the client's process can deadlock. Every emulator's wrapp
 
 from __future__ import annotations
 
+import math
+
 import os
 import queue
 import signal
@@ -111,6 +113,22 @@ def emulated_sensor(value: str, parser):
         return load_sensor_file(value) if value.endswith((".yaml", ".yml")) else builtin_sensor(value)
     except SensorModelError as exc:
         parser.error(f"--sensor: {exc}")
+
+
+def sensor_model_config(shear_kohm_per_n: float | None = None, parser=None):
+    """The emulated BioTacs' :class:`hardware.config.SensorModelConfig`: the simulator's
+    defaults, with ``--shear-kohm-per-n`` (``hardware.sensor.shear_kohm_per_n`` of a run) when
+    given, so an emulated lab can be run at the shear gain a simulated run is. A value that is
+    not a number ≥ 0 is ``parser.error`` (one line, exit 2), or ValueError without a parser."""
+    from ..config import SensorModelConfig
+    if shear_kohm_per_n is None:
+        return SensorModelConfig()
+    if not (math.isfinite(shear_kohm_per_n) and shear_kohm_per_n >= 0):
+        msg = f"--shear-kohm-per-n: expected a number of kΩ per N >= 0, got {shear_kohm_per_n}"
+        if parser is not None:
+            parser.error(msg)
+        raise ValueError(msg)
+    return SensorModelConfig(shear_kohm_per_n=float(shear_kohm_per_n))
 
 
 def free_loopback(subnet: int, port: int = 30004, tries: int = 50) -> str | None:

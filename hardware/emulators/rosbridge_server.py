@@ -41,7 +41,7 @@ import numpy as np
 
 from ..biotac import FINGERS
 from ..hand import JOINT_NAMES
-from .process import EmulatorProcess, emulated_sensor
+from .process import EmulatorProcess, emulated_sensor, sensor_model_config
 from .touch import frame_times, trajectory_positions
 
 CATCH_UP_S = 1.0       # a late loop sends the frames it missed up to this far back (s)
@@ -117,13 +117,14 @@ class BiotacSource:
     pressed by the emulated world when ``touch`` (:class:`~.touch.EmulatedWorld`) is given.
     ``sent[k]`` is the monotonic time message ``k + 1`` was handed to the websocket (s)."""
 
-    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None, sensor=None):
-        from ..config import SensorModelConfig
+    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None, sensor=None,
+                 model_config=None):
         from ..sim.sensor import BiotacModel, SensorInputs
 
         self.connected = [f for f in FINGERS if f not in unconnected]
         F = len(self.connected)
-        self.model = BiotacModel(self.connected, SensorModelConfig(), np.random.default_rng(seed), 1.0 / rate_hz,
+        self.model = BiotacModel(self.connected, model_config or sensor_model_config(), np.random.default_rng(seed),
+                                 1.0 / rate_hz,
                                  sensor)
         self.inputs = SensorInputs(np.zeros((F, self.model.N)), np.zeros(F), np.zeros(F), np.zeros(F))
         self.touch = touch
@@ -155,10 +156,11 @@ class BiotacSource:
 class Bridge:
     """Server state: clients and their subscriptions, the hand, the BioTacs, counters."""
 
-    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None, sensor=None):
+    def __init__(self, unconnected=(), seed: int = 0, rate_hz: float = 100.0, touch=None, sensor=None,
+                 model_config=None):
         self.clients: set = set()
         self.hand = HandModel(None if touch is None else touch.hand_writer())
-        self.biotacs = BiotacSource(unconnected, seed, rate_hz, touch, sensor)
+        self.biotacs = BiotacSource(unconnected, seed, rate_hz, touch, sensor, model_config)
         self.world = touch
         self.rate_hz = rate_hz
         self.paused = False
@@ -317,8 +319,10 @@ class RosbridgeEmulator(EmulatorProcess):
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, seed: int = 0, unconnected=(),
                  rate_hz: float = 100.0, world_dir: str | None = None, surface: str = "straws",
-                 sensor: str = "biotac_sp"):
+                 sensor: str = "biotac_sp", shear_kohm_per_n: float | None = None):
         args = ["--host", host, "--port", port, "--seed", seed, "--rate", rate_hz, "--sensor", sensor]
+        if shear_kohm_per_n is not None:
+            args += ["--shear-kohm-per-n", shear_kohm_per_n]
         if unconnected:
             args += ["--unconnected", ",".join(unconnected)]
         if world_dir:
@@ -349,6 +353,8 @@ def main(argv=None) -> int:
                         "emulated arm and hold the bottle in the hand")
     p.add_argument("--surface", default="straws", help="the board pressed on (conf/surface/NAME.yaml; none: no board)")
     p.add_argument("--sensor", default="biotac_sp", help="the BioTacs' sensor model: a name (conf/sensor/) or a .yaml")
+    p.add_argument("--shear-kohm-per-n", type=float, default=None,
+                   help="the BioTacs' shear response, kΩ per N (hardware.sensor.shear_kohm_per_n; default: the simulator's)")
     a = p.parse_args(argv)
     unconnected = [f for f in a.unconnected.split(",") if f]
     if any(f not in FINGERS for f in unconnected):
@@ -361,7 +367,7 @@ def main(argv=None) -> int:
         from .touch import EmulatedWorld
         touch = EmulatedWorld(a.world_dir, None if a.surface == "none" else a.surface,
                               [f for f in FINGERS if f not in unconnected], sensor)
-    bridge = Bridge(unconnected, a.seed, a.rate, touch, sensor)
+    bridge = Bridge(unconnected, a.seed, a.rate, touch, sensor, sensor_model_config(a.shear_kohm_per_n, p))
     try:
         asyncio.run(serve(a.host, a.port, bridge))
     except OSError as exc:

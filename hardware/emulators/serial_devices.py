@@ -38,7 +38,7 @@ import numpy as np
 from ..biotac import FINGERS
 from ..serial_biotac import encode_frame
 from ..serial_pour import format_weight_line
-from .process import EmulatorProcess, emulated_sensor
+from .process import EmulatorProcess, emulated_sensor, sensor_model_config
 from .touch import frame_times
 
 FIRMWARE = "2.4-emulated"
@@ -122,15 +122,15 @@ class BiotacBridge:
     or pressed by the emulated world when ``touch`` (:class:`~.touch.EmulatedWorld`) is given.
     ``sent[k]`` is the monotonic time frame ``k + 1`` was written to the pty (s)."""
 
-    def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0, touch=None, sensor=None):
-        from ..config import SensorModelConfig
+    def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0, touch=None, sensor=None,
+                 model_config=None):
         from ..sim.sensor import BiotacModel, SensorInputs
 
         self.pty = Pty("biotac")
         self.fingers = tuple(fingers)
         self.rate_hz = rate_hz
         self.rng = np.random.default_rng(seed)
-        self.model = BiotacModel(self.fingers, SensorModelConfig(), self.rng, 1.0 / rate_hz, sensor)
+        self.model = BiotacModel(self.fingers, model_config or sensor_model_config(), self.rng, 1.0 / rate_hz, sensor)
         F = len(self.fingers)
         self.inputs = SensorInputs(np.zeros((F, self.model.N)), np.zeros(F), np.zeros(F), np.zeros(F))
         self.touch = touch
@@ -325,8 +325,9 @@ class SerialLab:
     """The three devices of one emulator process."""
 
     def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0,
-                 pump_max_rate_ml_min: float = 150.0, reservoir_g: float = 1500.0, touch=None, sensor=None):
-        self.biotac = BiotacBridge(fingers, rate_hz, seed, touch, sensor)
+                 pump_max_rate_ml_min: float = 150.0, reservoir_g: float = 1500.0, touch=None, sensor=None,
+                 model_config=None):
+        self.biotac = BiotacBridge(fingers, rate_hz, seed, touch, sensor, model_config)
         self.world = touch
         self.pump_state = EmulatedPump(pump_max_rate_ml_min, None if touch is None else touch.pump_writer())
         self.pump = PumpDevice(self.pump_state)
@@ -390,9 +391,11 @@ class SerialDevicesEmulator(EmulatorProcess):
 
     def __init__(self, fingers=FINGERS, rate_hz: float = 100.0, seed: int = 0, link_dir: str | None = None,
                  pump_max_rate_ml_min: float = 150.0, world_dir: str | None = None, surface: str = "straws",
-                 sensor: str = "biotac_sp"):
+                 sensor: str = "biotac_sp", shear_kohm_per_n: float | None = None):
         args = ["--fingers", ",".join(fingers), "--rate", rate_hz, "--seed", seed,
                 "--pump-max-rate", pump_max_rate_ml_min, "--sensor", sensor]
+        if shear_kohm_per_n is not None:
+            args += ["--shear-kohm-per-n", shear_kohm_per_n]
         if link_dir:
             args += ["--link-dir", link_dir]
         if world_dir:
@@ -423,6 +426,8 @@ def main(argv=None) -> int:
                         "emulated arm and hold the bottle the pump fills")
     p.add_argument("--surface", default="straws", help="the board pressed on (conf/surface/NAME.yaml; none: no board)")
     p.add_argument("--sensor", default="biotac_sp", help="the BioTacs' sensor model: a name (conf/sensor/) or a .yaml")
+    p.add_argument("--shear-kohm-per-n", type=float, default=None,
+                   help="the BioTacs' shear response, kΩ per N (hardware.sensor.shear_kohm_per_n; default: the simulator's)")
     a = p.parse_args(argv)
     fingers = [f for f in a.fingers.split(",") if f]
     bad = [f for f in fingers if f not in FINGERS]
@@ -435,7 +440,8 @@ def main(argv=None) -> int:
     if a.world_dir:
         from .touch import EmulatedWorld
         touch = EmulatedWorld(a.world_dir, None if a.surface == "none" else a.surface, fingers, sensor)
-    lab = SerialLab(fingers, a.rate, a.seed, a.pump_max_rate, touch=touch, sensor=sensor)
+    lab = SerialLab(fingers, a.rate, a.seed, a.pump_max_rate, touch=touch, sensor=sensor,
+                    model_config=sensor_model_config(a.shear_kohm_per_n, p))
     if a.link_dir:
         link_ports(lab.ports(), a.link_dir)
     lab.start()
