@@ -229,8 +229,8 @@ def emulated_worlds(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def emulated_world(emulated_worlds):
-    """The emulated world at the simulator's default shear gain."""
-    return emulated_worlds(None)
+    """The emulated world at the realistic shear gain, 3 kΩ/N (one of the reactive pour's)."""
+    return emulated_worlds(3.0)
 
 
 def _released_bottle(emulator, before: int) -> dict:
