@@ -321,12 +321,14 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
                 if speed is not None:
                     act = seg.smooth(np.asarray(prepared.activation[b.start:b.stop, k], float)[:, pad], rate,
                                      cfg.segmentation.smooth_s)
-                    plateaus = est.taxel_plateaus(act, run.time[b.start:b.stop], speed[b.start:b.stop],
-                                                  e.width_level, e.texture_taxel_fraction)
+                    # once, at the lower of the two fractions; each reading keeps its own electrodes
+                    every = est.taxel_plateaus(act, run.time[b.start:b.stop], speed[b.start:b.stop], e.width_level,
+                                               min(e.texture_taxel_fraction, e.width_taxel_fraction))
+                    plateaus = None if every is None else every.strong(e.texture_taxel_fraction)
                     if e.width_signal == "taxels":
-                        width, dur, v, _ = est.feature_width_per_taxel(act, run.time[b.start:b.stop],
-                                                                       speed[b.start:b.stop], e.width_level,
-                                                                       e.min_speed_mm_s, e.width_taxel_fraction)
+                        width, dur, v, _ = est.width_from_plateaus(
+                            None if every is None else every.strong(e.width_taxel_fraction),
+                            speed[b.start:b.stop], e.min_speed_mm_s)
                     else:
                         width, dur, v = est.feature_width(sig, b, run.time, speed, cfg.segmentation.plateau_level,
                                                           e.min_speed_mm_s)
