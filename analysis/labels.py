@@ -147,6 +147,8 @@ class PourPhases:
     onsets: dict
     reasons: dict
     not_reached: dict = field(default_factory=dict)
+    #: [start, stop) frames searched for the initial slip (the pour start to the full slip's edge)
+    slip_search: tuple | None = None
 
 
 def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | None, rotation_noise_k: float,
@@ -222,6 +224,7 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
     edge = max(start, edge - 3)
     # the bottle first gives: the first sudden fall of the (lightly smoothed) pressure between
     # the pour start and the full slip's edge (stored strain released, load taken off the pad)
+    slip_edge = edge
     slip = seg.first_drop(q[:edge], start, trough_prominence, distance)
     if slip is None:
         reasons["initial_slip"] = ("no pressure trough (a sudden fall: the bottle giving) between the pour start "
@@ -262,7 +265,7 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
     not_reached = {}
     if onsets["full_slip"] is None:
         not_reached["full_slip"] = "the grasp holds until the record ends"
-    return PourPhases(onsets, reasons, not_reached)
+    return PourPhases(onsets, reasons, not_reached, (start, slip_edge))
 
 
 REACTED_FRAMES = 3     # frames after the reaction still searched for the initial slip's fall
