@@ -153,7 +153,7 @@ class PourPhases:
 
 def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | None, rotation_noise_k: float,
                 trough_prominence: float, distance: int, level: float = 0.5, fast=None,
-                reaction: int | None = None) -> PourPhases:
+                reaction: int | None = None, shared_slip: int | None = None) -> PourPhases:
     """Onsets of the pour phases of one grasp finger.
 
     Args:
@@ -170,6 +170,8 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
             the way from its level after the contact to its median over the contact.
         fast: (T,) a less smoothed pressure for the full-slip edge (default ``pressure``).
         reaction: frame of the protocol's first slip reaction (a reactive pour), or None.
+        shared_slip: the initial slip's onset when the grasp's fingers date it together (the
+            fall they share, :func:`segments.shared_first_drop`); the later phases follow it.
 
     - pour: the pour step if recorded inside the contact, else the contact reference;
     - initial_slip: the first sudden fall of ``fast`` after the pour start, deeper than
@@ -225,7 +227,7 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
     # the bottle first gives: the first sudden fall of the (lightly smoothed) pressure between
     # the pour start and the full slip's edge (stored strain released, load taken off the pad)
     slip_edge = edge
-    slip = seg.first_drop(q[:edge], start, trough_prominence, distance)
+    slip = seg.first_drop(q[:edge], start, trough_prominence, distance) if shared_slip is None else shared_slip
     if slip is None:
         reasons["initial_slip"] = ("no pressure trough (a sudden fall: the bottle giving) between the pour start "
                                    "and the full slip")

@@ -6,6 +6,7 @@ writing, figures and scoring.
 
 from __future__ import annotations
 
+import functools
 import time as _time
 from dataclasses import dataclass, field
 
@@ -405,22 +406,16 @@ def _crossings(run, cfg, prepared, bumps, plateaus, flows, model, rate, skipped)
     return out
 
 
-def _shared_initial_slip(found, distance) -> None:
-    """The bottle gives under every grasp finger at once: date the initial slip, in every finger's
-    phases, at the first fall most fingers share (:func:`segments.shared_first_drop`, each
-    finger's fall in units of its own noise) between the latest pour start and the earliest full
-    slip's edge; a finger's own first fall stays where they share none (and with one finger).
-    A reactive pour keeps each finger's (the slip is searched up to the reaction)."""
+def _shared_initial_slip(found, distance) -> int | None:
+    """The bottle gives under every grasp finger at once: the initial slip's onset as the first
+    fall most fingers share (:func:`segments.shared_first_drop`, each finger's fall in units of
+    its own noise) between the latest pour start and the earliest full slip's edge, or None
+    (each finger keeps its own first fall). ``found``: finger → (its phases, its pressure, ...)."""
     searched = [ph.slip_search for ph, *_ in found.values() if ph.slip_search is not None]
     if not searched:
-        return
+        return None
     start, stop = max(s for s, _ in searched), min(e for _, e in searched)
-    shared = seg.shared_first_drop([fast for _, fast, *_ in found.values()], start, stop, distance)
-    if shared is None:
-        return
-    for ph, *_ in found.values():
-        ph.onsets["initial_slip"] = shared
-        ph.reasons.pop("initial_slip", None)
+    return seg.shared_first_drop([fast for _, fast, *_ in found.values()], start, stop, distance)
 
 
 def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dict:
@@ -454,13 +449,17 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
             # the grasp tightened right after the slip: a smoothed pressure would carry that rise
             # back over the slip's fall, so the slip is dated on the causal (filter-only) proxy
             fast = np.asarray(prepared.causal_proxy[:, k], float)
-        ph = labelling.pour_phases(run.time, p, (a, b), ref, rot, pour_event, cfg.pour.rotation_noise_k,
-                             cfg.pour.trough_prominence, int(round(cfg.segmentation.distance_s * rate)),
-                             cfg.segmentation.plateau_level, fast=fast, reaction=reaction)
-        found[f] = (ph, fast, (a, b), ci)
-    if reaction is None and len(found) > 1:
-        _shared_initial_slip(found, int(round(cfg.segmentation.distance_s * rate)))
-    for f, (ph, fast, (a, b), ci) in found.items():
+        phases = functools.partial(labelling.pour_phases, run.time, p, (a, b), ref, rot, pour_event,
+                                   cfg.pour.rotation_noise_k, cfg.pour.trough_prominence,
+                                   int(round(cfg.segmentation.distance_s * rate)), cfg.segmentation.plateau_level,
+                                   fast=fast, reaction=reaction)
+        found[f] = (phases(), fast, (a, b), ci, phases)
+    shared = _shared_initial_slip(found, int(round(cfg.segmentation.distance_s * rate))) \
+        if reaction is None and len(found) > 1 else None
+    if shared is not None:                       # every finger's later phases follow the shared slip
+        found = {f: (again(shared_slip=shared), fast, ab, ci, again)
+                 for f, (_, fast, ab, ci, again) in found.items()}
+    for f, (ph, fast, (a, b), ci, _) in found.items():
         for name, why in ph.reasons.items():
             skipped.append({"what": f"phase {name}", "finger": f, "reason": why})
         if ph.not_reached:                        # a result (the grasp held), not a skipped estimate

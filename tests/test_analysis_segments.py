@@ -199,6 +199,19 @@ def test_pour_phases_from_a_made_up_grasp(gain):
     assert on["initial_slip"] == pytest.approx(8.0, abs=0.05)
 
 
+def test_a_shared_initial_slip_leads_the_finger_s_later_phases():
+    """A finger whose own first fall came early (its noise) takes the slip the fingers share; its
+    downward phase is searched after it, not after its own early fall."""
+    t, p, rot = made_up_grasp(12)
+    noisy = p + np.where((t > 5.0) & (t < 5.3), 0.9, 0.0)            # a swell that falls at 5.3 s
+    own = labelling.pour_phases(t, noisy, (101, 3500), 110, rot, 200, 6.0, 0.15, 50)
+    assert t[own.onsets["initial_slip"]] == pytest.approx(5.3, abs=0.1)
+    shared = labelling.pour_phases(t, noisy, (101, 3500), 110, rot, 200, 6.0, 0.15, 50, shared_slip=800)
+    assert shared.onsets["initial_slip"] == 800 and "initial_slip" not in shared.reasons
+    assert t[shared.onsets["downward"]] == pytest.approx(20.0, abs=0.05)
+    assert shared.slip_search[0] == 200 and t[shared.slip_search[1]] == pytest.approx(35.0, abs=0.2)
+
+
 def test_pour_without_a_turn_says_why():
     t, p, _ = made_up_grasp(12)
     rot = turn(t, 12.0, 0.0, 0.0003, drift=-0.0003)
