@@ -76,11 +76,13 @@ class TaxelPlateaus:
         start_mm, end_mm: (M,) distance the finger had travelled since the crossing's first frame
             when each electrode's activation rose above / fell below its level, mm.
         duration_s: (M,) how long each stayed above it, s.
+        rise_fraction: (M,) each one's rise as a fraction of the largest rise (1 for the largest).
     """
     used: np.ndarray
     start_mm: np.ndarray
     end_mm: np.ndarray
     duration_s: np.ndarray
+    rise_fraction: np.ndarray
 
     @property
     def width_mm(self) -> np.ndarray:
@@ -90,6 +92,12 @@ class TaxelPlateaus:
     def passing_mm(self) -> np.ndarray:
         """(M,) distance travelled when the feature's middle was under each electrode, mm."""
         return 0.5 * (self.start_mm + self.end_mm)
+
+    def strong(self, fraction: float) -> "TaxelPlateaus":
+        """The electrodes whose rise is at least ``fraction`` of the largest (never empty)."""
+        k = self.rise_fraction >= fraction
+        return TaxelPlateaus(self.used[k], self.start_mm[k], self.end_mm[k], self.duration_s[k],
+                             self.rise_fraction[k])
 
 
 def taxel_plateaus(activation, t, speed, level: float, strong: float) -> TaxelPlateaus | None:
@@ -122,7 +130,7 @@ def taxel_plateaus(activation, t, speed, level: float, strong: float) -> TaxelPl
         edges.append((seg._crossing(s, k, lev, -1), seg._crossing(s, k, lev, +1)))
     lo, hi = np.asarray(edges, float).T
     return TaxelPlateaus(used, np.interp(lo, idx, dist), np.interp(hi, idx, dist),
-                         np.interp(hi, idx, tt) - np.interp(lo, idx, tt))
+                         np.interp(hi, idx, tt) - np.interp(lo, idx, tt), rise[used] / rise.max())
 
 
 def feature_width_per_taxel(activation, t, speed, level: float, min_speed: float, strong: float = 0.3):
@@ -140,8 +148,15 @@ def feature_width_per_taxel(activation, t, speed, level: float, min_speed: float
     that shape with the sensor's shear gain. One electrode sees the feature through its own
     footprint only.
     """
-    p = taxel_plateaus(activation, t, speed, level, strong)
+    return width_from_plateaus(taxel_plateaus(activation, t, speed, level, strong), speed, min_speed)
+
+
+def width_from_plateaus(plateaus: TaxelPlateaus | None, speed, min_speed: float):
+    """(width, duration, speed, electrodes used) of :func:`feature_width_per_taxel` from the
+    plateaus of the electrodes that feel the feature (:meth:`TaxelPlateaus.strong` selects them);
+    ``speed``: (n,) TCP speed over the crossing, mm/s (its mean when the plateaus last no time)."""
     nan = float("nan")
+    p = plateaus
     if p is None:
         return nan, nan, nan, 0
     width, dur = float(np.median(p.width_mm)), float(np.median(p.duration_s))

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_flow.cliapp.workers import signals_deferred, worker_init
+from tactile_flow.cliapp.workers import signals_deferred, stop_workers, worker_init
 from tactile_flow.tactile import flow as tflow
 from tactile_flow.tactile import surface
 
@@ -675,21 +675,10 @@ class FigureWriter:
 
     def _stop_workers(self) -> None:
         """Cancel what is queued and end the workers now (their figures are not wanted: the
-        caller removes ``out_dir``), then wait for them to be gone. A second Ctrl-C landing in
-        a pool's orderly shutdown could leave a worker waiting and the process hanging at exit.
-        The workers are the children started since the pool was made: one an interrupt caught
-        between its start and the pool's bookkeeping counts too. SIGKILL, not SIGTERM: a worker
-        forked a moment ago may not have set its handlers yet (it would print a traceback)."""
-        if self.pool is not None:
-            self.pool.shutdown(wait=False, cancel_futures=True)
-        for _ in range(5):                       # the children listed again until none is left: a
-            workers = [p for p in multiprocessing.active_children() if p not in self._others]
-            if not workers:                      # worker still being started when first listed
-                break                            # was seen left behind (1 run in 7)
-            for process in workers:
-                process.kill()
-            for process in workers:
-                process.join()
+        caller removes ``out_dir``): :func:`~tactile_flow.cliapp.workers.stop_workers`. A second
+        Ctrl-C landing in a pool's orderly shutdown could leave a worker waiting and the process
+        hanging at exit; one caught between a worker's start and the pool's bookkeeping counts too."""
+        stop_workers(self.pool, self._others)
 
 
 def _draw_job(i: int, out_dir: Path) -> None:

@@ -147,11 +147,13 @@ class PourPhases:
     onsets: dict
     reasons: dict
     not_reached: dict = field(default_factory=dict)
+    #: [start, stop) frames searched for the initial slip (the pour start to the full slip's edge)
+    slip_search: tuple | None = None
 
 
 def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | None, rotation_noise_k: float,
                 trough_prominence: float, distance: int, level: float = 0.5, fast=None,
-                reaction: int | None = None) -> PourPhases:
+                reaction: int | None = None, shared_slip: int | None = None) -> PourPhases:
     """Onsets of the pour phases of one grasp finger.
 
     Args:
@@ -168,6 +170,8 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
             the way from its level after the contact to its median over the contact.
         fast: (T,) a less smoothed pressure for the full-slip edge (default ``pressure``).
         reaction: frame of the protocol's first slip reaction (a reactive pour), or None.
+        shared_slip: the initial slip's onset when the grasp's fingers date it together (the
+            fall they share, :func:`segments.shared_first_drop`); the later phases follow it.
 
     - pour: the pour step if recorded inside the contact, else the contact reference;
     - initial_slip: the first sudden fall of ``fast`` after the pour start, deeper than
@@ -222,7 +226,8 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
     edge = max(start, edge - 3)
     # the bottle first gives: the first sudden fall of the (lightly smoothed) pressure between
     # the pour start and the full slip's edge (stored strain released, load taken off the pad)
-    slip = seg.first_drop(q[:edge], start, trough_prominence, distance)
+    slip_edge = edge
+    slip = seg.first_drop(q[:edge], start, trough_prominence, distance) if shared_slip is None else shared_slip
     if slip is None:
         reasons["initial_slip"] = ("no pressure trough (a sudden fall: the bottle giving) between the pour start "
                                    "and the full slip")
@@ -262,7 +267,7 @@ def pour_phases(t, pressure, contact, reference, rotation, pour_event: int | Non
     not_reached = {}
     if onsets["full_slip"] is None:
         not_reached["full_slip"] = "the grasp holds until the record ends"
-    return PourPhases(onsets, reasons, not_reached)
+    return PourPhases(onsets, reasons, not_reached, (start, slip_edge))
 
 
 REACTED_FRAMES = 3     # frames after the reaction still searched for the initial slip's fall

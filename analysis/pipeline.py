@@ -6,6 +6,7 @@ writing, figures and scoring.
 
 from __future__ import annotations
 
+import functools
 import time as _time
 from dataclasses import dataclass, field
 
@@ -143,17 +144,22 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
         bumps[f] = [seg.bumps(p, iv, extrema[f].peaks, s.plateau_level) for iv in ivs]
     if not contacts:
         skipped.append({"what": "run", "reason": "no finger in contact at any time: no segments, no flow"})
+    plateaus: dict = {}
     if scheme == labelling.SWEEP:
         # the 'during' plateau is measured on the pad electrodes' sum (or the PDC with
         # width_signal=pdc): with width_signal=proxy the segment and the width estimate (plateau
         # duration x speed) describe the same stretch; with taxels the width is each electrode's
-        # own plateau (estimates.feature_width_per_taxel), the segment the pad's
+        # own plateau (estimates.feature_width_per_taxel), and so is the segment: it lasts as
+        # long as the width's electrodes' median plateau (the boundaries and the width agree)
         wsig = prepared.pressure if cfg.estimates.width_signal == "pdc" else prepared.pad_proxy
+        plateaus = _electrode_plateaus(run, cfg, prepared, bumps, rate)
         for f in bumps:
             k = run.fingers.index(f)
             ws = seg.smooth(wsig[:, k], rate, s.smooth_s)
             ps = seg.smooth(prepared.pressure[:, k], rate, s.smooth_s)
-            bumps[f] = [[seg.replateau(ws, ps, b, s.plateau_level) for b in bl] for bl in bumps[f]]
+            bumps[f] = [[seg.replateau(ws, ps, b, s.plateau_level, _plateau_frames(plateaus.get((f, b.start, b.stop)),
+                                                                                  cfg, rate))
+                         for b in bl] for bl in bumps[f]]
 
     margin = int(round(s.margin_s * rate))
     plan = fl.FlowPlan(primary=fl.primary_reference(cfg.reference, prepared.baseline.kind),
@@ -198,7 +204,8 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
                             raw=finger_activation(prepared.raw_activation, k))
         if est_ is not None:
             slips[sg.id] = est_
-    crossings = _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) if scheme == labelling.SWEEP else []
+    crossings = _crossings(run, cfg, prepared, bumps, plateaus, flows, model, rate, skipped) \
+        if scheme == labelling.SWEEP else []
     whole = _whole_run(flows, model, rate)
     t_end = _time.perf_counter()
     timing = {"prepare_s": t_prep - t_start, "flow_s": flow_s, "flow_stage_s": t_flow - t_prep,
@@ -276,15 +283,51 @@ def _whole_run(flows, model, rate) -> list[dict]:
 
 # ----------------------------------------------------------------------------- estimates
 
-def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[dict]:
-    """One row per feature crossed: direction (sensor, world), width, height, texture angle."""
+def _speed(run):
+    """(T,) TCP speed (mm/s) at the BioTac frames, or None without an arm record."""
+    if run.arm_time is None or run.tcp_speed is None:
+        return None
+    return est.speed_mm_s(run.arm_time, run.tcp_speed, run.time)
+
+
+def _electrode_plateaus(run, cfg, prepared, bumps, rate) -> dict:
+    """(finger, bump start, bump stop) → the plateaus of the pad electrodes that felt the crossing
+    (:func:`estimates.taxel_plateaus`, read once at the lower of the width's and the texture
+    angle's fractions; ``None`` when nothing rose); empty without a TCP speed."""
+    e = cfg.estimates
+    speed = _speed(run)
+    if speed is None:
+        return {}
+    pad = run.sensor.pad if run.sensor is not None and run.sensor.pad is not None else slice(None)
+    out = {}
+    for f, per_contact in bumps.items():
+        k = run.fingers.index(f)
+        for bl in per_contact:
+            for b in bl:
+                act = seg.smooth(np.asarray(prepared.activation[b.start:b.stop, k], float)[:, pad], rate,
+                                 cfg.segmentation.smooth_s)
+                out[(f, b.start, b.stop)] = est.taxel_plateaus(
+                    act, run.time[b.start:b.stop], speed[b.start:b.stop], e.width_level,
+                    min(e.texture_taxel_fraction, e.width_taxel_fraction))
+    return out
+
+
+def _plateau_frames(every, cfg, rate) -> float | None:
+    """How long (frames) a crossing's ``during`` lasts when widths are read per electrode: the
+    median plateau of the width's electrodes; None (the pad sum's plateau) otherwise."""
+    if cfg.estimates.width_signal != "taxels" or every is None:
+        return None
+    return float(np.median(every.strong(cfg.estimates.width_taxel_fraction).duration_s)) * rate
+
+
+def _crossings(run, cfg, prepared, bumps, plateaus, flows, model, rate, skipped) -> list[dict]:
+    """One row per feature crossed: direction (sensor, world), width, height, texture angle;
+    ``plateaus``: :func:`_electrode_plateaus` of the crossings."""
     out = []
     e = cfg.estimates
     width_sig = prepared.pressure if e.width_signal == "pdc" else prepared.pad_proxy
     pad = run.sensor.pad if run.sensor is not None and run.sensor.pad is not None else slice(None)
-    speed = None
-    if run.arm_time is not None and run.tcp_speed is not None:
-        speed = est.speed_mm_s(run.arm_time, run.tcp_speed, run.time)
+    speed = _speed(run)
     for f, per_contact in bumps.items():
         k = run.fingers.index(f)
         feature = 0
@@ -317,16 +360,15 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
                     skipped.append({"what": "direction_world", "finger": f, "feature": row["feature"],
                                     "reason": "no arm pose or no fingertip pose in the run's config"})
                 row["direction_world"] = d_w
-                plateaus = None
+                passing = None
                 if speed is not None:
-                    act = seg.smooth(np.asarray(prepared.activation[b.start:b.stop, k], float)[:, pad], rate,
-                                     cfg.segmentation.smooth_s)
-                    plateaus = est.taxel_plateaus(act, run.time[b.start:b.stop], speed[b.start:b.stop],
-                                                  e.width_level, e.texture_taxel_fraction)
+                    # read once (_electrode_plateaus); each reading keeps its own electrodes
+                    every = plateaus.get((f, b.start, b.stop))
+                    passing = None if every is None else every.strong(e.texture_taxel_fraction)
                     if e.width_signal == "taxels":
-                        width, dur, v, _ = est.feature_width_per_taxel(act, run.time[b.start:b.stop],
-                                                                       speed[b.start:b.stop], e.width_level,
-                                                                       e.min_speed_mm_s, e.width_taxel_fraction)
+                        width, dur, v, _ = est.width_from_plateaus(
+                            None if every is None else every.strong(e.width_taxel_fraction),
+                            speed[b.start:b.stop], e.min_speed_mm_s)
                     else:
                         width, dur, v = est.feature_width(sig, b, run.time, speed, cfg.segmentation.plateau_level,
                                                           e.min_speed_mm_s)
@@ -340,10 +382,10 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
                                     "reason": "no TCP speed recorded (arm group missing)"})
                 ridge, why = None, None
                 if e.texture_angle == "passing":
-                    if plateaus is None:
+                    if passing is None:
                         why = "no TCP speed recorded" if speed is None else "no electrode rose over the crossing"
                     else:
-                        ridge, unc, why = est.ridge_from_passing(plateaus, model.taxels[pad],
+                        ridge, unc, why = est.ridge_from_passing(passing, model.taxels[pad],
                                                                  e.texture_max_uncertainty_deg)
                         row["texture_angle_uncertainty_deg"] = unc
                 elif cf is not None and "bottom" in cf.views:
@@ -364,6 +406,18 @@ def _crossings(run, cfg, prepared, bumps, flows, model, rate, skipped) -> list[d
     return out
 
 
+def _shared_initial_slip(found, distance) -> int | None:
+    """The bottle gives under every grasp finger at once: the initial slip's onset as the first
+    fall most fingers share (:func:`segments.shared_first_drop`, each finger's fall in units of
+    its own noise) between the latest pour start and the earliest full slip's edge, or None
+    (each finger keeps its own first fall). ``found``: finger → (its phases, its pressure, ...)."""
+    searched = [ph.slip_search for ph, *_ in found.values() if ph.slip_search is not None]
+    if not searched:
+        return None
+    start, stop = max(s for s, _ in searched), min(e for _, e in searched)
+    return seg.shared_first_drop([fast for _, fast, *_ in found.values()], start, stop, distance)
+
+
 def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dict:
     """Pour phases per grasp finger (its longest contact) and the run's onsets (median)."""
     rate = run.rate_hz
@@ -374,7 +428,7 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
     for t, name, _ in run.events.of_kind("reaction"):
         reaction = int(np.searchsorted(run.time, t))
         break
-    per_finger, not_reached = {}, {}
+    per_finger, not_reached, found = {}, {}, {}
     for f, ivs in contacts.items():
         k = run.fingers.index(f)
         ci = int(np.argmax([b - a for a, b in ivs]))
@@ -395,9 +449,17 @@ def _pour(run, cfg, prepared, contacts, flows, segments, skipped, margin) -> dic
             # the grasp tightened right after the slip: a smoothed pressure would carry that rise
             # back over the slip's fall, so the slip is dated on the causal (filter-only) proxy
             fast = np.asarray(prepared.causal_proxy[:, k], float)
-        ph = labelling.pour_phases(run.time, p, (a, b), ref, rot, pour_event, cfg.pour.rotation_noise_k,
-                             cfg.pour.trough_prominence, int(round(cfg.segmentation.distance_s * rate)),
-                             cfg.segmentation.plateau_level, fast=fast, reaction=reaction)
+        phases = functools.partial(labelling.pour_phases, run.time, p, (a, b), ref, rot, pour_event,
+                                   cfg.pour.rotation_noise_k, cfg.pour.trough_prominence,
+                                   int(round(cfg.segmentation.distance_s * rate)), cfg.segmentation.plateau_level,
+                                   fast=fast, reaction=reaction)
+        found[f] = (phases(), fast, (a, b), ci, phases)
+    shared = _shared_initial_slip(found, int(round(cfg.segmentation.distance_s * rate))) \
+        if reaction is None and len(found) > 1 else None
+    if shared is not None:                       # every finger's later phases follow the shared slip
+        found = {f: (again(shared_slip=shared), fast, ab, ci, again)
+                 for f, (_, fast, ab, ci, again) in found.items()}
+    for f, (ph, fast, (a, b), ci, _) in found.items():
         for name, why in ph.reasons.items():
             skipped.append({"what": f"phase {name}", "finger": f, "reason": why})
         if ph.not_reached:                        # a result (the grasp held), not a skipped estimate

@@ -135,13 +135,15 @@ def bumps(pressure, contact: tuple[int, int], peaks, level: float = 0.5) -> list
     return out
 
 
-def replateau(signal, pressure, bump: Bump, level: float = 0.5) -> Bump:
+def replateau(signal, pressure, bump: Bump, level: float = 0.5, frames: float | None = None) -> Bump:
     """The bump's plateau centred where ``pressure``'s plateau is centred, as long as
-    ``signal``'s plateau lasts (both (T,); fractional edges, rounded to frames).
+    ``signal``'s plateau lasts (both (T,); fractional edges, rounded to frames), or ``frames``
+    long when given.
 
     Used with the PDC as ``pressure`` (the whole-fingertip pressure, symmetric about the pad's
     lowest point: where the feature is) and the pad electrodes' sum as ``signal`` (a sharper
-    footprint: how long the feature is under the pad)."""
+    footprint: how long the feature is under the pad), or the electrodes' own plateaus'
+    duration as ``frames`` (the feature's width, read as the width estimate reads it)."""
     def edges(x):
         x = np.asarray(x, float)
         k = bump.start + int(np.argmax(x[bump.start:bump.stop]))
@@ -149,8 +151,10 @@ def replateau(signal, pressure, bump: Bump, level: float = 0.5) -> Bump:
         lev = floor + level * (x[k] - floor)
         return _crossing(x, k, lev, -1), _crossing(x, k, lev, +1)
     lo_p, hi_p = edges(pressure)
-    lo_s, hi_s = edges(signal)
-    c, half = (lo_p + hi_p) / 2.0, (hi_s - lo_s) / 2.0
+    if frames is None:
+        lo_s, hi_s = edges(signal)
+        frames = hi_s - lo_s
+    c, half = (lo_p + hi_p) / 2.0, frames / 2.0
     i0 = max(bump.start, int(round(c - half)))
     i1 = min(bump.stop, int(round(c + half)))
     return Bump(bump.start, bump.stop, bump.peak, (i0, max(i1, i0 + 1)), bump.height)
@@ -205,6 +209,51 @@ def first_drop(signal, start: int, fraction: float, window: int, noise_k: float 
         j = min(n - 1, e + window)
     steep = i + int(np.argmin(np.diff(x[i:j + 1])))
     return start + steep + 1
+
+
+def shared_first_drop(signals, start: int, stop: int, window: int, noise_k: float = 8.0) -> int | None:
+    """Onset of the first sudden fall that most of ``signals`` (each (T,): the fingers holding one
+    object) share, between frames ``start`` and ``stop``: the first frame where the median over
+    the signals of each one's fall within ``window`` frames, in units of its own noise
+    (:func:`robust_noise`), stands out of that median fall's own spread over the stretch (above
+    its median by ``noise_k`` × its robust std); dated at the steepest step of the signals' sum
+    (each in units of its noise) over the fall and a window on, as :func:`first_drop`.
+
+    Why shared: an object that gives slips under every finger at once, while one finger's
+    pressure may fluctuate well beyond its median noise on its own (a looser, noisier contact).
+    Only ratios to each signal's noise are read: neither its scale nor its slow trend (which a
+    fraction of the range would follow) decides. ``None`` if they never fall so together.
+    """
+    from numpy.lib.stride_tricks import sliding_window_view
+    window = max(2, int(window))
+    n = stop - start
+    if n < window + 3 or not len(signals):
+        return None
+    z = []
+    for sig in signals:
+        x = np.asarray(sig, float)[start:stop]
+        noise = robust_noise(x, window)
+        if not noise > 0:
+            continue
+        x = x / noise
+        ahead = sliding_window_view(np.r_[x[1:], np.full(window, np.inf)], window).min(axis=1)[:n]
+        z.append((x, x - ahead))
+    if not z:
+        return None
+    fall = np.median([f for _, f in z], axis=0)
+    # a window's fall of coloured noise with a slow trend runs to several times the noise: the
+    # threshold is read on the falls themselves, their median plus noise_k times their spread
+    typical = float(np.median(fall))
+    thr = typical + noise_k * 1.4826 * float(np.median(np.abs(fall - typical)))
+    hit = np.flatnonzero(fall > thr)
+    if not hit.size:
+        return None
+    i = e = int(hit[0])
+    while e + 1 < n and fall[e + 1] > thr:
+        e += 1
+    j = min(n - 1, e + window)
+    total = np.sum([x for x, _ in z], axis=0)
+    return start + i + int(np.argmin(np.diff(total[i:j + 1]))) + 1
 
 
 def robust_noise(signal, window: int) -> float:

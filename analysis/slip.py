@@ -35,7 +35,7 @@ Decision (documented in docs/analysis.md, constants in ``analysis.slip``):
   dynamic and the static flows' end values averaged (a pull's spurious turn, which grows on the
   way, halves in them) reach ``min_rotation_deg``; for one whose centre of pressure stayed
   within ``min_displacement_mm``, when the static flow's rotation since the reference window
-  reaches ``min_still_rotation_deg`` or how far the flows' mean turned reaches
+  rose in its one ramp by ``min_still_rotation_deg`` (:func:`static_rise`) or how far the flows' mean turned reaches
   ``min_rotation_deg`` (:func:`turn`); the
   contact *rotated* when that turn, as the arc it sweeps at the contact's radius, is at least
   ``arc_ratio`` of the displacement (an object turned about an axis away from the contact also
@@ -334,14 +334,31 @@ def _rotation_evidence(cf, views, ref, stop, model, pm, end, moving) -> tuple[di
             static = float(np.median(series[-max(1, len(series) // 5):]))
             path = float(np.abs(np.diff(series)).sum())
             straightness = abs(static) / path if path > 0 else None
+    rise = static_rise(series)
     tail = pm.turn_deg[max(0, end - max(1, end // 5)):end]
     turn = float(np.median(tail)) if len(tail) else None
     both = [v for v in (dynamic, static) if v is not None]
     evidence = {"rotation_deg": float(np.mean(both)) if both else None, "dynamic_deg": dynamic,
                 "moving_frames": moving_frames,
-                "static_deg": static, "static_straightness": straightness, "pattern_turn_deg": turn, "pattern_elongation": pm.elongation,
+                "static_deg": static, "static_rise_deg": rise, "static_straightness": straightness,
+                "pattern_turn_deg": turn, "pattern_elongation": pm.elongation,
                 "peak_deg": _peak_turn(per_frame, series)}
     return evidence, (None if per_frame is None else np.r_[0.0, np.cumsum(per_frame)]), series
+
+
+def static_rise(series) -> float | None:
+    """How far the static flow's turn since the reference window went in its one ramp (deg,
+    signed): the rise of the still → ramp → slower fit of ``series`` (N,) deg
+    (:func:`analysis.slip_onset.knee`), 0 for a flat series, ``None`` without one (fewer than 8
+    frames). A twist turns the stuck skin's pattern in one ramp until the skin breaks away; after
+    that the pattern rides, drifts back or unloads, so its end value (``static_deg``, the median
+    of the last fifth) can be well below how far it turned. A still touch's static turn wanders
+    or drifts slowly, and its best ramp is no larger than that wander. A shape's height read by
+    least squares, in the turn's own unit: the same threshold as the end value."""
+    if series is None or len(series) < 8:
+        return None
+    k = knee(series)
+    return float(k.rise) if k is not None else 0.0
 
 
 def _peak_turn(per_frame, series, q: float = 90.0) -> float | None:
@@ -386,8 +403,10 @@ def turn(displacement, rotation: dict, cfg) -> tuple[float | None, str]:
     A contact that moved (its centre of pressure ``cfg.min_displacement_mm`` or more from its
     reference window) is always read so: a pull turns the rendered pattern by up to 0.7°/mm on
     the way (docs/analysis.md), and the two flows' opposite spurious turns halve in their end
-    values. ``"static"``: for a contact that stayed in place, the static flow's rotation since the
-    reference window (``rotation["static_deg"]``) where it reaches ``cfg.min_still_rotation_deg``:
+    values. ``"static"``: for a contact that stayed in place, how far the static flow's rotation
+    since the reference window went in its one ramp (``rotation["static_rise_deg"]``,
+    :func:`static_rise`; ``static_deg``, its end value, where that is not given) where it reaches
+    ``cfg.min_still_rotation_deg``:
     nothing pulled the contact, and at the shear the real contact frames allow a twist turns the
     pattern by a third of a degree to a degree — one comparison with the reference keeps it (16
     of 16 twists in the right sense on the SP grid at gain 3), while the frame-to-frame curl
@@ -399,7 +418,7 @@ def turn(displacement, rotation: dict, cfg) -> tuple[float | None, str]:
     frames is read fully by its end values); both held to ``cfg.min_rotation_deg``."""
     end = rotation.get("rotation_deg")
     peak = rotation.get("peak_deg")
-    static = rotation.get("static_deg")
+    static = rotation.get("static_rise_deg", rotation.get("static_deg"))
     still = displacement is not None and math.isfinite(displacement) and displacement < cfg.min_displacement_mm
     if still and static is not None and math.isfinite(static) and abs(static) >= cfg.min_still_rotation_deg:
         return float(static), "static"

@@ -6,7 +6,8 @@
 Reads the slip-in-place grid that ``benchmarks/bench_slip_direction.py`` wrote (same ``--out``,
 ``--set``, ``--grid``, ``--noise``, ``--seeds``; missing runs are run), analyses every run with
 ``tactile-analyze``'s defaults, and prints one JSON line per run with all of its rotation
-evidence (``evidence.rotation`` of the slip estimate: ``dynamic_deg``, ``static_deg``, their mean
+evidence (``evidence.rotation`` of the slip estimate: ``dynamic_deg``, ``static_deg``, the rise of
+the static turn's ramp ``static_rise_deg``, the mean of the dynamic and static end values
 ``rotation_deg``, ``peak_deg``, ``pattern_turn_deg``, and the turn the decision read), its
 displacement and its contact's radius. Then a markdown table, per evidence: the twists' smallest
 |turn| and how many read the right sense, the touches' and the pulls' largest |turn|, the margins
@@ -40,7 +41,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_slip_direction as bsd  # noqa: E402
 
-EVIDENCE = ("dynamic_deg", "static_deg", "rotation_deg", "peak_deg", "pattern_turn_deg", "turn_deg")
+EVIDENCE = ("dynamic_deg", "static_deg", "static_rise_deg", "rotation_deg", "peak_deg", "pattern_turn_deg", "turn_deg")
 
 
 def rows_of(args) -> list[dict]:
@@ -146,7 +147,8 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-THRESHOLDS = (("turn_deg", (0.9, 0.2, 0.35, 0.45)), ("static_deg", (0.25, 0.35, 0.45)))
+THRESHOLDS = (("turn_deg", (0.9, 0.2, 0.35, 0.45)), ("static_deg", (0.25, 0.35, 0.45)),
+              ("static_rise_deg", (0.3, 0.45)))
 """The readings and thresholds (deg) :func:`thresholds` counts."""
 
 

@@ -142,7 +142,8 @@ def source_rotation(est, source):
 
 def reread(est, cfg, rotation_source=None, direction_source=None, per_mm=None):
     """The shipped decision with one evidence source in place of the shipped one (a rotation
-    source in place of both of the shipped turn's readings, the peak and the end values).
+    source in place of every one of the shipped turn's readings: the end values, the peak and the
+    static turn's rise and end).
     ``per_mm`` (deg/mm): the turn read is the flows' end values less ``per_mm`` × the
     displacement (what a pull's spurious turn explains), towards 0."""
     from tactile_flow.analysis.slip import classify, turn
@@ -151,11 +152,12 @@ def reread(est, cfg, rotation_source=None, direction_source=None, per_mm=None):
     rot_ev = dict(est["evidence"]["rotation"])
     motion = est["evidence"]["motion"]
     if rotation_source:
-        rot_ev.update(rotation_deg=source_rotation(est, rotation_source), peak_deg=None, static_deg=None)
+        rot_ev.update(rotation_deg=source_rotation(est, rotation_source), peak_deg=None, static_deg=None,
+                      static_rise_deg=None)
     if per_mm is not None:
         end = rot_ev.get("rotation_deg") or 0.0
         rot_ev.update(rotation_deg=math.copysign(max(0.0, abs(end) - per_mm * motion["displacement_mm"]), end),
-                      peak_deg=None, static_deg=None)
+                      peak_deg=None, static_deg=None, static_rise_deg=None)
     cls, _ = classify(motion["displacement_mm"], rot_ev, motion["radius_mm"], est.get("direction_agreement"), cfg)
     direction = source_direction(est, direction_source) if direction_source else est["slip_direction_sensor_deg"]
     if direction is None and cls == "translation":     # a variant reads as a translation what the shipped did not

@@ -131,6 +131,46 @@ def test_first_drop_dates_a_fall_that_a_smoother_led_by_its_steepest_step():
         assert abs(t[i] - 10.0) < 0.04, (fraction, t[i])
 
 
+def fingers_holding_a_bottle_that_gives(seed=0, giving=(True, True, True)):
+    """Three fingers' pressures (T,) as one bottle gives under them at 20 s (a shared dip), on a
+    slow decline with the load; the first finger's contact is loose, its smoothed noise runs
+    five times the others' and swells at 9 and 15 s into falls of 10× its median noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(4000) / RATE
+    out = []
+    for (scale, noise), gives in zip(((1.0, 0.03), (0.8, 0.006), (2.0, 0.009)), giving):
+        x = scale * (2.0 - 0.02 * t) + seg.smooth(rng.normal(0, noise * 4, len(t)), RATE, 0.08)
+        x = x - gives * 0.15 * scale * np.clip((t - 20.0) / 0.05, 0, 1) * np.exp(-np.clip(t - 20.05, 0, None) / 0.8)
+        out.append(x)
+    for at in (9.0, 15.0):
+        out[0] = out[0] + 0.3 * np.exp(-((t - at) / 0.15) ** 2)
+    return t, out
+
+
+def test_a_fall_the_fingers_share_is_the_bottle_giving_not_one_finger_s_noise():
+    t, fingers = fingers_holding_a_bottle_that_gives()
+    alone = seg.first_drop(fingers[0], 200, 0.15, 50)
+    assert alone is not None and t[alone] < 17.0                    # the loose finger alone: a swell
+    i = seg.shared_first_drop(fingers, 200, 3800, 50)
+    assert abs(t[i] - 20.0) < 0.05, t[i]
+    # only ratios to each finger's own noise: a finger's scale or offset does not move it
+    scaled = [fingers[0] * 30.0 + 5.0, fingers[1] * 0.01, fingers[2]]
+    assert seg.shared_first_drop(scaled, 200, 3800, 50) == i
+
+
+def test_no_shared_fall_when_one_finger_falls_alone():
+    t, fingers = fingers_holding_a_bottle_that_gives(giving=(False, False, True))
+    assert seg.first_drop(fingers[2], 200, 0.15, 50) is not None          # it falls, on its own
+    assert seg.shared_first_drop(fingers, 200, 3800, 50) is None
+
+
+def test_replateau_lasts_as_long_as_asked_centred_on_the_pressure():
+    x = np.exp(-((np.arange(400) - 200.0) / 40.0) ** 2)
+    b = seg.Bump(50, 350, 200, (170, 230), 1.0)
+    assert seg.replateau(x, x, b, 0.5, frames=60.0).plateau == (170, 230)
+    assert seg.replateau(x, np.roll(x, 10), b, 0.5, frames=30.0).plateau == (195, 225)
+
+
 def made_up_grasp(gain):
     """A pour as the pads read it at a shear gain ``gain`` (12: the simulator's former
     default, 3: what real BioTac SP frames allow): the pad pressure sinks with the shear term
@@ -157,6 +197,19 @@ def test_pour_phases_from_a_made_up_grasp(gain):
     assert on["downward"] == pytest.approx(20.0, abs=0.05)
     assert on["full_slip"] == pytest.approx(35.0, abs=0.05)
     assert on["initial_slip"] == pytest.approx(8.0, abs=0.05)
+
+
+def test_a_shared_initial_slip_leads_the_finger_s_later_phases():
+    """A finger whose own first fall came early (its noise) takes the slip the fingers share; its
+    downward phase is searched after it, not after its own early fall."""
+    t, p, rot = made_up_grasp(12)
+    noisy = p + np.where((t > 5.0) & (t < 5.3), 0.9, 0.0)            # a swell that falls at 5.3 s
+    own = labelling.pour_phases(t, noisy, (101, 3500), 110, rot, 200, 6.0, 0.15, 50)
+    assert t[own.onsets["initial_slip"]] == pytest.approx(5.3, abs=0.1)
+    shared = labelling.pour_phases(t, noisy, (101, 3500), 110, rot, 200, 6.0, 0.15, 50, shared_slip=800)
+    assert shared.onsets["initial_slip"] == 800 and "initial_slip" not in shared.reasons
+    assert t[shared.onsets["downward"]] == pytest.approx(20.0, abs=0.05)
+    assert shared.slip_search[0] == 200 and t[shared.slip_search[1]] == pytest.approx(35.0, abs=0.2)
 
 
 def test_pour_without_a_turn_says_why():

@@ -98,6 +98,22 @@ def test_width_per_taxel_none_when_nothing_rose_or_too_slow():
     assert math.isnan(w) and v == pytest.approx(0.1)
 
 
+def test_plateaus_once_at_the_lower_fraction_select_as_if_computed_at_each():
+    """The pipeline reads the plateaus once and selects the width's and the angle's electrodes by
+    their rise: the same electrodes and plateaus as reading them at each fraction."""
+    act, t, _ = _crossing(6.0, shear_gain=1.0)
+    act = seg.smooth(act, RATE, 0.05)
+    v = np.full(len(t), SPEED)
+    every = est.taxel_plateaus(act, t, v, 0.5, 0.1)
+    assert every.rise_fraction.max() == 1.0 and every.rise_fraction.min() >= 0.1
+    for fraction in (0.1, 0.3, 0.5, 1.0):
+        a, b = every.strong(fraction), est.taxel_plateaus(act, t, v, 0.5, fraction)
+        assert np.array_equal(a.used, b.used) and len(a.used) >= 1
+        for name in ("start_mm", "end_mm", "duration_s", "rise_fraction"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert est.width_from_plateaus(every.strong(0.5), v, 0.5) == est.feature_width_per_taxel(act, t, v, 0.5, 0.5, 0.5)
+
+
 def _passing_angle(act, t, taxels, max_unc=15.0):
     p = est.taxel_plateaus(seg.smooth(act, RATE, 0.05), t, np.full(len(t), SPEED), 0.5, 0.1)
     return est.ridge_from_passing(p, taxels, max_unc)

@@ -431,6 +431,30 @@ def test_a_twist_at_the_shear_the_real_frames_allow_is_a_twist_dated_by_its_stat
 
 
 @pytest.mark.slow
+def test_a_light_twist_at_the_shear_the_real_frames_allow_is_read_by_how_far_its_static_turn_rose(tmp_path):
+    """The light (1.3 N) clockwise twist on the flat board without tare, with the simulator's shear
+    gain at 3 kΩ/N: the stuck skin's pattern turned half a degree in the static flow, then drifted
+    back to an end value of 0.27° once the skin broke away — under ``min_still_rotation_deg``,
+    read as a touch before. Read by how far its static turn rose in its one ramp
+    (``static_rise_deg``): a rotation, clockwise, dated."""
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.load import load_run, open_truth
+    from tactile_flow.analysis.pipeline import analyse
+    from tactile_flow.analysis.score import score
+    c = Condition("rotate", rotation_deg=-30.0, press_force=1.3, surface="flat", tare=False)
+    r = run_slip_in_place(tmp_path / "run", c, overrides=["hardware.sensor.shear_kohm_per_n=3"])
+    assert r.status == "success", r.error
+    a = analyse(load_run(r.store), load_config({"figures": False, "progress": False}))
+    truth = score(a, open_truth(r.store))["object_motions"][0]
+    slip = a.slips[truth["segment"]]
+    rot = slip["evidence"]["rotation"]
+    cfg = load_config({}).slip
+    assert abs(rot["static_deg"]) < cfg.min_still_rotation_deg <= abs(rot["static_rise_deg"]), rot
+    assert rot["read_as"] == "static" and slip["slip_class"] == "rotation" and slip["rotation_deg"] < 0, slip
+    assert slip["slip_onset_s"] is not None and slip["slip_displacement_mm"] < cfg.min_displacement_mm
+
+
+@pytest.mark.slow
 def test_a_firm_tared_pull_at_the_shear_the_real_frames_allow_is_dated_at_its_release(tmp_path):
     """The firm (5 N) pull at 0° on the cylinder with a tare, at shear gain 3 kΩ/N: the press goes
     on loading the contact after its reference window, so the change from the motion onset to the

@@ -192,6 +192,45 @@ def test_a_still_touch_whose_static_flow_turned_a_little_stays_a_touch():
     assert turn(2.0, rotation, cfg) == (0.2, "end")
 
 
+def _static_turn(seed: int, ramp_deg: float, back_deg: float, drift_deg: float = 0.0) -> np.ndarray:
+    """A static flow's turn since the reference window, deg, over a 1.8 s contact at 100 Hz: still
+    for 0.45 s, a ramp of ``ramp_deg`` over 0.3 s (the stuck skin twisted), then ``back_deg`` of it
+    let go over the rest (the skin broke away and the pattern drifts back), a slow ``drift_deg``
+    over the whole contact and a smooth wander of a few hundredths of a degree (the flow of a
+    still pattern under the resting noise)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(180)
+    twist = ramp_deg * np.clip((t - 45) / 30.0, 0.0, 1.0) - back_deg * np.clip((t - 75) / 105.0, 0.0, 1.0)
+    wander = np.convolve(rng.normal(0.0, 0.03, 200), np.ones(20) / 20.0, mode="same")[:180]
+    return twist + drift_deg * t / 179.0 + wander - wander[0]
+
+
+def test_a_light_twist_that_drifted_back_is_read_by_how_far_its_static_turn_rose():
+    """Seed 0's light clockwise twist on the flat board without tare at the shear the real frames
+    allow (3 kΩ/N): its static turn rose 0.50° while the skin stuck, then drifted back to an end
+    value of 0.27° — under ``min_still_rotation_deg``, read as a touch before. How far it rose in
+    its one ramp (``static_rise``) is the twist; a still touch's wander and slow drift (real
+    contact frames: end values up to 0.23°, rises up to 0.26°) rises less."""
+    from tactile_flow.analysis.slip import classify, static_rise, turn
+    cfg = _slip_cfg()
+    for seed in range(4):
+        series = _static_turn(seed, -0.5, -0.25)
+        end = float(np.median(series[-36:]))
+        rise = static_rise(series)
+        assert abs(end) < cfg.min_still_rotation_deg <= abs(rise) and rise < 0, (end, rise)
+        rotation = {"rotation_deg": -0.12, "dynamic_deg": 0.03, "static_deg": end, "static_rise_deg": rise,
+                    "peak_deg": -0.2}
+        assert turn(0.15, rotation, cfg) == (rise, "static")
+        assert classify(0.15, rotation, 2.6, None, cfg)[0] == "rotation"
+        assert classify(0.15, {**rotation, "static_rise_deg": None}, 2.6, None, cfg)[0] == "none"   # its end value
+        touch = _static_turn(seed, 0.0, 0.0, drift_deg=0.25)                  # a touch drifting 0.25°
+        rise = static_rise(touch)
+        assert abs(rise) < 0.3, rise
+        assert classify(0.1, {"rotation_deg": 0.1, "static_deg": float(np.median(touch[-36:])),
+                              "static_rise_deg": rise, "peak_deg": 0.15}, 2.6, None, cfg)[0] == "none"
+    assert static_rise(np.zeros(50)) == 0.0 and static_rise(np.zeros(5)) is None
+
+
 def test_a_pull_is_read_by_its_end_values_so_its_spurious_turn_on_the_way_stays_a_pull():
     """A 5 N pull at 300° on the flat board: the rendered pattern turned up to 2.3° on the way
     (a pull's spurious turn grows with its length), its flows' end values average 1.4°. It moved
