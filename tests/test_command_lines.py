@@ -84,6 +84,7 @@ def test_gitignore_covers_the_output_roots():
     ("tactile-recover", ["nowhere"], "not a run store"),
     ("tactile-view", ["run", "--bogus"], "unrecognized arguments"),
     ("tactile-emulate", ["--seed", "x"], "invalid int value"),
+    ("tactile-emulate", ["--shear-kohm-per-n", "-1"], "expected a number of kΩ per N >= 0, got -1"),
     ("tactile-demo", ["--speed", "fast"], "invalid float value"),
 ])
 def test_bad_input_is_one_line_and_exit_2_in_every_command(tmp_path, name, args, words):

@@ -103,14 +103,18 @@ def build_parser():
     parser.add_argument("--pump-max-rate", type=float, default=PUMP_MAX_RATE_ML_MIN,
                         help=f"the emulated pump's fastest flow, ml/min (default {PUMP_MAX_RATE_ML_MIN:g}, "
                              "hardware.pump.max_rate_ml_min of lab_emulated.yaml: rehearse pours faster)")
+    parser.add_argument("--shear-kohm-per-n", type=float, default=None,
+                        help="the emulated BioTacs' shear response, kΩ per N (default: the simulator's); run "
+                             "protocols with the same hardware.sensor.shear_kohm_per_n=")
     return parser
 
 
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    from .process import emulated_sensor
+    from .process import emulated_sensor, sensor_model_config
     emulated_sensor(args.sensor, parser)                 # a bad model is refused here, not in a child
+    sensor_model_config(args.shear_kohm_per_n, parser)
     surfaces = sorted(p.stem for p in (CONF_DIR / "surface").glob("*.yaml"))
     if args.surface != "none" and args.surface not in surfaces:
         parser.error(f"--surface {args.surface}: expected one of {', '.join(surfaces)} or none")
@@ -131,13 +135,14 @@ def main(argv=None) -> int:
         elif not args.no_ur:
             print("UR controller   not available (hardware/emulators/ur_controller.py missing)")
         ros = RosbridgeEmulator(host="127.0.0.1", port=args.rosbridge_port, seed=args.seed, world_dir=world_dir,
-                                surface=args.surface, sensor=args.sensor).start()
+                                surface=args.surface, sensor=args.sensor,
+                                shear_kohm_per_n=args.shear_kohm_per_n).start()
         started.append(ros)
         print(f"rosbridge       {ros.url}  (/rh/tactile at 100 Hz, /joint_states, "
               f"/rh_trajectory_controller/command)")
         serial = SerialDevicesEmulator(link_dir=args.link_dir, seed=args.seed, world_dir=world_dir,
                                        surface=args.surface, pump_max_rate_ml_min=args.pump_max_rate,
-                                       sensor=args.sensor).start()
+                                       sensor=args.sensor, shear_kohm_per_n=args.shear_kohm_per_n).start()
         started.append(serial)
         for name in ("biotac", "pump", "scale"):
             print(f"{name:<15} {Path(args.link_dir) / name} -> {serial.ports[name]}")
@@ -151,6 +156,8 @@ def main(argv=None) -> int:
         print(f"sensor          {args.sensor}")
         print(f"\nIn another terminal:  {env}tactile-run hardware=lab_emulated"
               + ("" if args.sensor == "biotac_sp" else f" sensor={args.sensor}")
+              + ("" if args.shear_kohm_per_n is None else
+                 f" hardware.sensor.shear_kohm_per_n={args.shear_kohm_per_n:g}")
               + ("" if args.rosbridge_port == 9090 else f" hardware.rosbridge.url={ros.url}")
               + ("" if args.host == "127.0.0.1" else f" hardware.arm.host={args.host}"))
         print("Ctrl-C stops the emulated lab.", flush=True)
