@@ -338,6 +338,8 @@ TESTED: dict[str, object] = {
     'tactile-run --cfg job': HERE,
     'tactile-emulate --sensor biotac': Options("the emulators run until stopped (tests/test_rosbridge.py starts them "
                                                "with the classic model)"),
+    'tactile-emulate --shear-kohm-per-n G': Options("the emulators run until stopped (tests/test_lab_emulated.py "
+                                                   "starts them at gains 3 and 12)"),
     'tactile-emulate --sensor <your configs>/sensor/<name>.yaml':
         Options("the emulators run until stopped; --sensor takes a file as sensor= does"),
     'tactile-import source=lab/classic.csv':
