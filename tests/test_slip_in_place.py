@@ -383,6 +383,24 @@ def test_the_analysis_reads_the_slip_and_meets_its_targets(cli_runs, kind, tare,
         assert m["start"] - 0.2 <= slip["slip_onset_s"] <= m["end"] and slip["slip_onset_uncertainty_s"] > 0, m
 
 
+GAIN_3 = ["hardware.sensor.shear_kohm_per_n=3"]
+"""The shear gain the real contact frames allow (docs/simulator.md)."""
+
+
+def _slip_of(tmp_path, condition, **run) -> tuple[dict, dict]:
+    """``condition`` run in place (``run``: ``seed=``, ``overrides=``) and analysed with the
+    defaults: the slip estimate of the object's motion and that motion's truth."""
+    from tactile_flow.analysis.config import load_config
+    from tactile_flow.analysis.load import load_run, open_truth
+    from tactile_flow.analysis.pipeline import analyse
+    from tactile_flow.analysis.score import score
+    r = run_slip_in_place(tmp_path / "run", condition, **run)
+    assert r.status == "success", r.error
+    a = analyse(load_run(r.store), load_config({"figures": False, "progress": False}))
+    truth = score(a, open_truth(r.store))["object_motions"][0]
+    return a.slips[truth["segment"]], truth
+
+
 @pytest.mark.slow
 def test_a_light_twist_that_drifts_back_is_read_as_a_twist(tmp_path):
     """The SP grid's light (1.3 N) counter-clockwise twist on the flat board without tare: the
@@ -390,15 +408,8 @@ def test_a_light_twist_that_drifts_back_is_read_as_a_twist(tmp_path):
     values average below ``min_rotation_deg`` (round 2 read it as a touch). Its centre of
     pressure stays in place, so the decision reads the static flow's turn since the reference
     window: a rotation, the right sense, dated."""
-    from tactile_flow.analysis.config import load_config
-    from tactile_flow.analysis.load import load_run, open_truth
-    from tactile_flow.analysis.pipeline import analyse
-    from tactile_flow.analysis.score import score
     c = Condition("rotate", rotation_deg=30.0, press_force=1.3, surface="flat", tare=False)
-    r = run_slip_in_place(tmp_path / "run", c)
-    assert r.status == "success", r.error
-    a = analyse(load_run(r.store), load_config({"figures": False, "progress": False}))
-    slip = a.slips[score(a, open_truth(r.store))["object_motions"][0]["segment"]]
+    slip, _ = _slip_of(tmp_path, c)
     rot = slip["evidence"]["rotation"]
     assert abs(rot["rotation_deg"]) < 0.9 and rot["read_as"] == "static", rot   # the end values alone miss it
     assert slip["slip_class"] == "rotation" and slip["rotation_deg"] > 0.45, rot
@@ -413,16 +424,8 @@ def test_a_twist_at_the_shear_the_real_frames_allow_is_a_twist_dated_by_its_stat
     pressure stays in place, so its static flow's turn since the reference window is read: a
     rotation, clockwise, and — the summed curl being noise — dated by that turn, within 50 ms of
     the board's start."""
-    from tactile_flow.analysis.config import load_config
-    from tactile_flow.analysis.load import load_run, open_truth
-    from tactile_flow.analysis.pipeline import analyse
-    from tactile_flow.analysis.score import score
     c = Condition("rotate", rotation_deg=-30.0, press_force=5.0, surface="flat", tare=False)
-    r = run_slip_in_place(tmp_path / "run", c, overrides=["hardware.sensor.shear_kohm_per_n=3"])
-    assert r.status == "success", r.error
-    a = analyse(load_run(r.store), load_config({"figures": False, "progress": False}))
-    truth = score(a, open_truth(r.store))["object_motions"][0]
-    slip = a.slips[truth["segment"]]
+    slip, truth = _slip_of(tmp_path, c, overrides=GAIN_3)
     rot = slip["evidence"]["rotation"]
     assert rot["read_as"] == "static" and max(abs(rot["rotation_deg"]), abs(rot["peak_deg"])) < 0.9, rot
     assert slip["slip_class"] == "rotation" and slip["rotation_deg"] < -0.45, rot
@@ -438,15 +441,8 @@ def test_a_light_twist_at_the_shear_the_real_frames_allow_is_read_by_how_far_its
     read as a touch before. Read by how far its static turn rose in its one ramp
     (``static_rise_deg``): a rotation, clockwise, dated."""
     from tactile_flow.analysis.config import load_config
-    from tactile_flow.analysis.load import load_run, open_truth
-    from tactile_flow.analysis.pipeline import analyse
-    from tactile_flow.analysis.score import score
     c = Condition("rotate", rotation_deg=-30.0, press_force=1.3, surface="flat", tare=False)
-    r = run_slip_in_place(tmp_path / "run", c, overrides=["hardware.sensor.shear_kohm_per_n=3"])
-    assert r.status == "success", r.error
-    a = analyse(load_run(r.store), load_config({"figures": False, "progress": False}))
-    truth = score(a, open_truth(r.store))["object_motions"][0]
-    slip = a.slips[truth["segment"]]
+    slip, _ = _slip_of(tmp_path, c, overrides=GAIN_3)
     rot = slip["evidence"]["rotation"]
     cfg = load_config({}).slip
     assert abs(rot["static_deg"]) < cfg.min_still_rotation_deg <= abs(rot["static_rise_deg"]), rot
@@ -461,16 +457,8 @@ def test_a_firm_tared_pull_at_the_shear_the_real_frames_allow_is_dated_at_its_re
     knee is mostly the press; projected on it, the skin's release did not show and a fall 131 ms
     after the breakaway was taken. Read on the stretch's shape (the press's part removed) against
     the signal's own noise while still, it is dated within 50 ms of the breakaway."""
-    from tactile_flow.analysis.config import load_config
-    from tactile_flow.analysis.load import load_run, open_truth
-    from tactile_flow.analysis.pipeline import analyse
-    from tactile_flow.analysis.score import score
     c = Condition("translate", direction_deg=0.0, press_force=5.0, surface="cylinder", tare=True)
-    r = run_slip_in_place(tmp_path / "run", c, overrides=["hardware.sensor.shear_kohm_per_n=3"])
-    assert r.status == "success", r.error
-    a = analyse(load_run(r.store), load_config({"figures": False, "progress": False}))
-    truth = score(a, open_truth(r.store))["object_motions"][0]
-    slip = a.slips[truth["segment"]]
+    slip, truth = _slip_of(tmp_path, c, overrides=GAIN_3)
     assert slip["slip_class"] == "translation" and slip["evidence"]["onset"]["dated_by"] == "release", slip
     assert abs(slip["slip_onset_s"] - truth["true_slip_onset_s"]) <= 0.05, (slip["slip_onset_s"], truth)
 
@@ -482,15 +470,8 @@ def test_a_light_pull_on_the_cylinder_under_the_holders_tremor_reads_as_a_pull(t
     widened the pattern (RMS radius 3.9 mm against 3.2 under seed 0) and turned the pull's
     rendered pattern by 4°: read as a twist. With the traction kept as the contact grows
     (``hardware.sim.skin.grown``) it is a pull, in its direction."""
-    from tactile_flow.analysis.config import load_config
-    from tactile_flow.analysis.load import load_run, open_truth
-    from tactile_flow.analysis.pipeline import analyse
-    from tactile_flow.analysis.score import score
     c = Condition("translate", direction_deg=180.0, press_force=1.3, surface="cylinder", tare=True)
-    r = run_slip_in_place(tmp_path / "run", c, seed=1)
-    assert r.status == "success", r.error
-    a = analyse(load_run(r.store), load_config({"figures": False, "progress": False}))
-    slip = a.slips[score(a, open_truth(r.store))["object_motions"][0]["segment"]]
+    slip, _ = _slip_of(tmp_path, c, seed=1)
     assert slip["evidence"]["motion"]["radius_mm"] < 3.8, slip["evidence"]["motion"]
     assert slip["slip_class"] == "translation", slip["evidence"]["rotation"]
     assert abs((slip["slip_direction_sensor_deg"] - 180.0 + 180.0) % 360.0 - 180.0) <= 45.0
