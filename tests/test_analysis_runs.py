@@ -159,9 +159,10 @@ def test_missing_groups_no_contact_aborted_and_short_segments(runs, tmp_path):
     assert s["headline"]["crossings"] == 2
     assert (store.parent / "analysis" / "summary.json").exists() and (store.parent / "analysis" / "analysis.zarr.zip").is_file()
 
-    # a plateau level this close to the peak leaves 'during' segments of < 2 frames
+    # a level this close to the peak leaves 'during' segments of < 2 frames (a sweep's 'during'
+    # lasts as long as its electrodes stay above estimates.width_level of their rise)
     store = _copy(src, tmp_path, "short")
-    s = analyze_run(store, {**FAST, "segmentation": {"plateau_level": 0.9999}}, console=lambda *a: None)
+    s = analyze_run(store, {**FAST, "estimates": {"width_level": 0.9999}}, console=lambda *a: None)
     short = [x for x in s["skipped"] if "shorter than two frames" in x["reason"]]
     assert short and all(x["what"] == "segment during" for x in short)
 
@@ -247,7 +248,7 @@ def test_a_reanalysis_links_the_figures_whose_inputs_it_shares_and_they_are_as_d
     analyze_run(store, base, name="first", console=lambda *a: None)
     kept = store.parent / "analyses"
     changes = {"flow": {"flow": {"winsize": 11}},                           # the flow figures change
-               "segments": {"segmentation": {"plateau_level": 0.45}}}      # the segments change too
+               "segments": {"estimates": {"width_level": 0.45}}}           # the segments change too
     for tag, change in changes.items():
         lines = []                                     # the second one draws what changed in 2 forked workers
         analyze_run(store, {**base, **change, "workers": 1 if tag == "flow" else 2}, name=tag, console=lines.append)
