@@ -67,7 +67,7 @@ class SlipConfig:
 
     contact_kohm: float = 0.5          # total activation that counts as contact [kΩ]
     settle_s: float = 0.5              # contact held this long before a slip can be declared [s]
-    release_drop: float = 0.1          # one-frame relative fall of the total activation [1]
+    release_drop: float = 0.1          # smallest fall over release_frames beyond the trend [1]
     release_frames: int = 4            # frames over which the fall is measured [1]
     release_confidence: float = 0.2    # fraction of the footprint moving in one of them [1]
     release_noise: float = 7.0         # ... and that many times that fall's own noise [1]
