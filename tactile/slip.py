@@ -12,7 +12,8 @@ steady contact for ``settle_s``):
     with ``trend_tau_s``, as it was before the window: :func:`release_fall`), by more than
     ``release_drop`` of its value *and* by more than ``release_noise`` times that same
     n-frame fall's own usual size on this finger (an EMA, ``noise_tau_s``, of its absolute
-    value: :func:`release_ratio`; the filtered activation's noise is correlated from frame
+    value, as it was before the window, like the trend: a give spread over its first frames
+    must not raise its own reference; :func:`release_ratio`; the filtered activation's noise is correlated from frame
     to frame, so it is measured over the window, not scaled from one frame: a light contact
     is noisier, relatively, than a firm one, and its give is judged against its own noise),
     while the footprint moves in one of those frames, in some view: at least
@@ -163,8 +164,8 @@ def release_ratio(excess: float, noise: float, drop: float, factor: float) -> fl
 
     Args:
         excess: :func:`release_fall` of this frame [1].
-        noise: the same quantity's own usual size before this frame (an EMA of its absolute
-            value, ``noise_tau_s``) [1].
+        noise: the same quantity's own usual size before the window (an EMA of its absolute
+            value, ``noise_tau_s``, as it was ``release_frames`` frames ago) [1].
         drop: ``release_drop``, the smallest relative fall that counts [1].
         factor: ``release_noise``, the multiple of the noise that counts [1].
 
@@ -198,6 +199,7 @@ class SlipDetector:
         n = int(config.release_frames)
         self._ring_total = np.full((F, n), np.nan)  # the last n totals [kΩ] (slot k: the frame n ago, once full)
         self._ring_trend = np.zeros((F, n))         # the trend taken before each of them [1/frame]
+        self._ring_noise = np.zeros((F, n))         # the n-frame fall's noise taken before each of them [1]
         self._noise_n = np.zeros(F)                 # EMA of |n-frame fall beyond the trend|: its own noise [1]
         self._samples = np.zeros(F, np.int64)       # n-frame falls seen (starts the noise EMA as a mean)
         self._moved = np.zeros((F, n))              # how much it moved in those frames (≥ 1: moving)
@@ -219,6 +221,7 @@ class SlipDetector:
         self._trend[finger] = 0.0
         self._ring_total[finger] = np.nan
         self._ring_trend[finger] = 0.0
+        self._ring_noise[finger] = 0.0
         self._noise_n[finger] = 0.0
         self._samples[finger] = 0
         self._moved[finger] = 0.0
@@ -299,15 +302,16 @@ class SlipDetector:
         self._trend[f] += a_trend * (drop - trend)
         k = self._slot[f] = (self._slot[f] + 1) % self._ring_total.shape[1]
         before, trend_before = self._ring_total[f, k], self._ring_trend[f, k]   # n frames ago
+        noise = self._ring_noise[f, k]                              # the noise as it was then
         self._ring_total[f, k], self._ring_trend[f, k] = total, trend
+        self._ring_noise[f, k] = self._noise_n[f]
         self._moved[f, k] = max(confidence.max() / c.release_confidence, motion)
         excess = release_fall(before, total, trend_before, self._ring_total.shape[1], c.contact_kohm)
-        noise = self._noise_n[f]                                    # before this frame
         if math.isfinite(excess):
             self._samples[f] += 1
-            self._noise_n[f] += max(a_noise, 1.0 / self._samples[f]) * (abs(excess) - noise)
+            self._noise_n[f] += max(a_noise, 1.0 / self._samples[f]) * (abs(excess) - self._noise_n[f])
         # each criterion's statistic over its threshold: ≥ 1 fires (see the module docstring)
-        if self._moved[f].max() >= 1.0 and math.isfinite(excess) and self._samples[f] > 1:
+        if self._moved[f].max() >= 1.0 and math.isfinite(excess) and self._samples[f] > self._ring_total.shape[1] + 1:
             ratios[0] = release_ratio(excess, noise, c.release_drop, c.release_noise)
         speed = np.hypot(self._flow[f, :, 0], self._flow[f, :, 1])
         persistent = speed >= c.creep_persistence * np.maximum(self._length[f], 1e-12)

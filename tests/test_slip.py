@@ -182,13 +182,13 @@ def test_flow_noise_with_a_pressure_wobble_is_not_a_release():
     assert feed(SlipDetector(1), total, mean=mean) == []
 
 
-def _light_contact(T=1500, at=900, fall=0.28, seed=0, release=True):
+def _light_contact(T=1500, at=900, fall=0.28, seed=0, release=True, tau_frames=3.0):
     """A light contact as the thumb's filtered activation shows it at a realistic shear gain
     (3 kΩ/N; the simulated pour at grip 1.08 rad): 1.5 kΩ drifting down 1.3 %/s while the
     bottle fills, with noise correlated from frame to frame (AR(1), lag-1 correlation 0.85,
     2.2 % of the level: what the Kalman-filtered total shows), and the mean flow noisy
     around 0.002 px/frame. With ``release`` the contact lets go ``fall`` of its activation
-    from frame ``at``, spread over a few frames (time constant 3 frames), the flow jumping
+    from frame ``at``, spread over a few frames (time constant ``tau_frames``), the flow jumping
     3.5× for two frames. Returns (total (T, 1), mean (T, 1, 1, 2))."""
     rng = np.random.default_rng(seed)
     phi, sd = 0.85, 0.022
@@ -199,7 +199,7 @@ def _light_contact(T=1500, at=900, fall=0.28, seed=0, release=True):
     level = 1.5 * (1 - 0.013 * t)
     if release:
         k = np.arange(T) - at
-        level = level * np.where(k >= 0, 1 - fall * (1 - np.exp(-(k + 1) / 3.0)), 1.0)
+        level = level * np.where(k >= 0, 1 - fall * (1 - np.exp(-(k + 1) / tau_frames)), 1.0)
     speed = 0.002 * (1 + 0.5 * rng.standard_normal(T)).clip(0.1)
     if release:
         speed[at:at + 2] = 3.5 * 0.002
@@ -233,3 +233,15 @@ def test_release_fall_is_beyond_the_drift_before_the_window():
     # over its threshold: the larger of release_drop and release_noise × the fall's own noise
     assert release_ratio(0.18, 0.01, 0.1, 7.0) == pytest.approx(0.18 / 0.1)
     assert release_ratio(0.18, 0.03, 0.1, 7.0) == pytest.approx(0.18 / 0.21)
+
+
+@pytest.mark.parametrize("fall,tau_frames", [(0.24, 3.0), (0.28, 4.0)])
+def test_a_give_is_judged_against_the_noise_before_it_not_its_own(fall, tau_frames):
+    """A light contact's give spread over its first frames raises the running noise estimate
+    as it happens (its own 4-frame falls are part of it): judged against that, a 24 % give
+    (28 % a little slower) was missed on one contact in five. The noise is taken as it was
+    before the window, as the trend is: every one is caught within 40 ms."""
+    for seed in range(5):
+        total, mean = _light_contact(seed=seed, fall=fall, tau_frames=tau_frames)
+        fired = feed(SlipDetector(1), total, mean=mean)
+        assert fired and fired[0][2] == "release" and 9.0 <= fired[0][0] <= 9.04, (seed, fired[:1])
