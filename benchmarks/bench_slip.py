@@ -137,8 +137,8 @@ class Probe(SlipDetector):
         self.hits: list[tuple[float, int, int]] = []
         self.count_from = -np.inf               # armed frames are counted from this time on
 
-    def update(self, t, processed, total, mean, curl, confidence, still=True):
-        s = super().update(t, processed, total, mean, curl, confidence, still)
+    def update(self, t, processed, total, mean, curl, confidence, still=True, contact=None):
+        s = super().update(t, processed, total, mean, curl, confidence, still, contact)
         ok = np.asarray(processed, bool) & np.isfinite(total)
         armed = ok & s.in_contact
         for k, m in enumerate(MARGINS):
@@ -157,12 +157,14 @@ class Probe(SlipDetector):
 
 
 def probe_stream(t, processed, total, mean, curl, confidence, config: SlipConfig, still=True,
-                 count_from=-np.inf) -> Probe:
-    """Feed recorded per-frame aggregates ((T, F, ...) arrays) to a :class:`Probe`."""
+                 count_from=-np.inf, contact=None) -> Probe:
+    """Feed recorded per-frame aggregates ((T, F, ...) arrays) to a :class:`Probe`; ``contact``
+    (T, F): the arming measure (Σ |activation|; default ``total``, as stores written before it)."""
     p = Probe(total.shape[1], config)
     p.count_from = count_from
     for i in range(len(t)):
-        p.update(float(t[i]), processed[i], total[i], mean[i], curl[i], confidence[i], still=still)
+        p.update(float(t[i]), processed[i], total[i], mean[i], curl[i], confidence[i], still=still,
+                 contact=None if contact is None else contact[i])
     return p
 
 
@@ -260,9 +262,15 @@ def _live_arrays(live, sel):
             live.curl.values[sel], live.confidence.values[sel])
 
 
+def _live_contact(live, sel):
+    """The arming measure of the live group (Σ |activation|), or None in stores written before it."""
+    return live.activation_contact.values[sel] if "activation_contact" in live else None
+
+
 def _probe_live(live, sel, cfg, count_from=-np.inf) -> Probe:
     from tactile_flow.protocols.settings import run_settings
-    return probe_stream(*_live_arrays(live, sel), run_settings(cfg).live.slip, still=True, count_from=count_from)
+    return probe_stream(*_live_arrays(live, sel), run_settings(cfg).live.slip, still=True, count_from=count_from,
+                        contact=_live_contact(live, sel))
 
 
 def grip_cfg(seconds: float, seed: int, flexion: float):
@@ -324,8 +332,10 @@ def rest_job(kind: str, seed: int, grip_seconds: float = 60.0, flexion: float = 
             tt = bt.time.values
             # only the fingers that ever reached contact: the others are never armed, so
             # they cannot fire (and replaying them would only cost time)
+            contact = _live_contact(live, slice(None))
+            contact = live.activation_total.values if contact is None else contact
             touched = [f for k, f in enumerate(fingers)
-                       if np.nanmax(live.activation_total.values[:, k], initial=-np.inf) >= slip_cfg.contact_kohm]
+                       if np.nanmax(contact[:, k], initial=-np.inf) >= slip_cfg.contact_kohm]
             rows = [list(bt.finger.values).index(f) for f in touched]
             e = bt.electrodes.values[:, rows].astype(float)
             i0, i1 = np.searchsorted(tt, tare[2]["start"]), np.searchsorted(tt, tare[2]["end"])
@@ -365,10 +375,10 @@ def rest_bag() -> dict:
     flow = OnlineFlow(model, rest, fingers)
     steps = [flow.push(int(rec.seq[i]), float(t[i]), rec.electrodes[i]).copy() for i in range(len(t))]
     arr = {k: np.stack([getattr(s, k) for s in steps]) for k in
-           ("processed", "activation_total", "mean_col", "mean_row", "curl", "confidence")}
+           ("processed", "activation_total", "activation_contact", "mean_col", "mean_row", "curl", "confidence")}
     p = probe_stream(t, arr["processed"], arr["activation_total"],
                      np.stack([arr["mean_col"], arr["mean_row"]], axis=-1), arr["curl"], arr["confidence"],
-                     SlipConfig())
+                     SlipConfig(), contact=arr["activation_contact"])
     dt = _dt(t)
     seconds = float(len(t) * dt)
     ht = [h[0] for h in out["detections"]]
@@ -380,6 +390,8 @@ def rest_bag() -> dict:
             "probe_matches_replay": [(h[0], fingers[h[1]], CAUSES[h[2]]) for h in p.hits] == out["detections"],
             "max_activation_total_kohm": {f: _r(np.nanmax(arr["activation_total"][:, k]), 3)
                                           for k, f in enumerate(fingers)},
+            "max_activation_contact_kohm": {f: _r(np.nanmax(arr["activation_contact"][:, k]), 3)
+                                            for k, f in enumerate(fingers)},
             "contact_kohm": SlipConfig().contact_kohm,
             "margins": p.margins(fingers, dt)}
 

@@ -236,6 +236,7 @@ class LiveMonitor:
         n, F, V = len(frames), len(self.fingers), len(self.views)
         cols = {"time_live": np.empty(n), "processed_time": np.empty(n), "seq": np.empty(n, np.int64),
                 "processed": np.zeros((n, F), bool), "activation_total": np.empty((n, F)),
+                "activation_contact": np.empty((n, F)),
                 **{k: np.empty((n, F, V)) for k in ("flow_col", "flow_row", "magnitude", "direction",
                                                      "divergence", "curl", "confidence")},
                 "slip_fired": np.zeros((n, F), bool), "slip_cause": np.zeros((n, F), np.int8),
@@ -252,7 +253,7 @@ class LiveMonitor:
             c1 = time.perf_counter()
             mean = np.stack([step.mean_col, step.mean_row], axis=-1)
             state = self.detector.update(t_frame, step.processed, step.activation_total, mean, step.curl,
-                                         step.confidence, still=self.still)
+                                         step.confidence, still=self.still, contact=step.activation_contact)
             c2 = time.perf_counter()
             cols["time_live"][i], cols["seq"][i] = t, fr.seq
             cols["processed_time"][i] = self.clock.now() - t0
@@ -263,6 +264,7 @@ class LiveMonitor:
                                   "flow_ms": round(1e3 * (c1 - c0), 4), "detector_ms": round(1e3 * (c2 - c1), 4),
                                   "waited_ms": round(1e3 * (cols["processed_time"][i] - t) - 1e3 * (c2 - c0), 4)}
             cols["processed"][i], cols["activation_total"][i] = step.processed, step.activation_total
+            cols["activation_contact"][i] = step.activation_contact
             for k, name in (("flow_col", "mean_col"), ("flow_row", "mean_row"), ("magnitude", "magnitude"),
                             ("direction", "direction"), ("divergence", "divergence"), ("curl", "curl"),
                             ("confidence", "confidence")):
@@ -343,7 +345,7 @@ def replay(model: TactileModel, rest_impedance, seq, t, electrodes, fingers, sli
         step = flow.push(int(seq[i]), float(t[i]), electrodes[i])
         state = det.update(float(t[i]), step.processed, step.activation_total,
                            np.stack([step.mean_col, step.mean_row], axis=-1), step.curl, step.confidence,
-                           still=True if still is None else bool(still[i]))
+                           still=True if still is None else bool(still[i]), contact=step.activation_contact)
         hits += [(float(t[i]), fingers[k], CAUSES[state.cause[k]]) for k in np.flatnonzero(state.fired)]
     return {"detections": hits, "first": hits[0] if hits else None, "frames": len(t), "counters": flow.counters()}
 

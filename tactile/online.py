@@ -98,6 +98,11 @@ class OnlineStep:
         confidence: (F, V) fraction of footprint pixels moving more than ``config.noise``.
         activation_total: (F,) sum of the N filtered activations, kΩ: the PDC proxy
             :func:`tactile.signals.pdc_proxy` of the filtered activation.
+        activation_contact: (F,) sum of their absolute values, kΩ: how much the skin is
+            touched, whatever the sign of each taxel's change. A shear stretch raises some
+            taxels' impedance and lowers others', so under a growing load the signed sum
+            can fall to zero or below while the finger still holds; this one cannot (it is
+            never below |activation_total|): what the slip detector arms on.
 
     Flow is from the finger's previous *processed* frame ("px/frame" = per processed
     frame); a finger's first frame (after construction or :meth:`OnlineFlow.reset`) has
@@ -116,6 +121,7 @@ class OnlineStep:
     curl: np.ndarray
     confidence: np.ndarray
     activation_total: np.ndarray
+    activation_contact: np.ndarray
 
     def copy(self) -> "OnlineStep":
         """An independent copy (its arrays are not reused by later pushes)."""
@@ -163,14 +169,14 @@ def _filter_step(counts, usable, baseline, r, q, x, p, n, counts_max, reference)
 
 @numba.njit(cache=True, nogil=True)
 def _results(sums, moving, n_mask, processed, mean_col, mean_row, magnitude, direction, divergence, curl,
-             confidence, activation_total):  # pragma: no cover - compiled
+             confidence, activation_total, activation_contact):  # pragma: no cover - compiled
     """The (F, V) aggregates from ``sums`` (F, V, 4) = (Σ u, Σ v, divergence, curl) and
     ``moving`` (F, V) footprint pixels above the noise, as :func:`tactile.aggregate.aggregate_flow`
     finishes them (``n_mask`` (V,): footprint pixels per view); NaN (and NaN
-    ``activation_total``) for fingers not ``processed``."""
+    ``activation_total``, ``activation_contact``) for fingers not ``processed``."""
     for f in range(sums.shape[0]):
         if not processed[f]:
-            activation_total[f] = np.nan
+            activation_total[f] = activation_contact[f] = np.nan
         for v in range(sums.shape[1]):
             if processed[f]:
                 u, w = sums[f, v, 0], sums[f, v, 1]
@@ -239,6 +245,7 @@ class OnlineFlow:
         self._counts = np.empty((n_f, n_t))
         self._usable = np.empty(n_f, np.bool_)
         self._x = np.zeros((n_f, n_t))
+        self._abs_x = np.zeros((n_f, n_t))            # scratch of |x| (activation_contact)
         self._x32 = np.zeros((n_f, 1, n_t), np.float32)             # linear renderer's input
         self._p = np.zeros(n_f)
         self._n = np.zeros(n_f, np.int64)
@@ -279,7 +286,7 @@ class OnlineFlow:
         nan_fv = lambda: np.full((n_f, n_v), np.nan)                           # noqa: E731
         self._step = OnlineStep(seq=0, t=math.nan, processed=np.zeros(n_f, np.bool_),
                                 **{name: nan_fv() for name in AGGREGATES},
-                                activation_total=np.full(n_f, np.nan))
+                                activation_total=np.full(n_f, np.nan), activation_contact=np.full(n_f, np.nan))
 
     def _view_calls(self, f, v, low, gain):
         """Finger f, view v: ``(slots, field, aggregate args)``; ``slots[s]`` = (render args,
@@ -382,9 +389,10 @@ class OnlineFlow:
     def _finish(self, step: OnlineStep) -> OnlineStep:
         """The step's arrays from the aggregate sums and the filter state."""
         np.sum(self._x, axis=1, out=step.activation_total)
+        np.sum(np.abs(self._x, out=self._abs_x), axis=1, out=step.activation_contact)
         _results(self._sums, self._moving, self._n_mask, step.processed, step.mean_col, step.mean_row,
                  step.magnitude, step.direction, step.divergence, step.curl, step.confidence,
-                 step.activation_total)
+                 step.activation_total, step.activation_contact)
         return step
 
     # ------------------------------------------------------------------ state

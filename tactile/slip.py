@@ -66,7 +66,7 @@ class SlipConfig:
     (Not frozen: it is also the schema of the ``live.slip`` config node, which Hydra
     overrides key by key.)"""
 
-    contact_kohm: float = 0.5          # total activation that counts as contact [kΩ]
+    contact_kohm: float = 0.5          # total activation that begins a contact, Σ |activation| that keeps it [kΩ]
     settle_s: float = 0.5              # contact held this long before a slip can be declared [s]
     release_drop: float = 0.1          # smallest fall over release_frames beyond the trend [1]
     release_frames: int = 4            # frames over which the fall is measured [1]
@@ -232,7 +232,8 @@ class SlipDetector:
             self._length[finger] = 0.0
             self._curl[finger] = 0.0
 
-    def update(self, t: float, processed, total, mean, curl, confidence, still: bool = True) -> SlipState:
+    def update(self, t: float, processed, total, mean, curl, confidence, still: bool = True,
+               contact=None) -> SlipState:
         """Take one frame's aggregates; return the (reused) :class:`SlipState`.
 
         Args:
@@ -244,8 +245,14 @@ class SlipDetector:
             curl: (F, V) mean curl per view [1/frame].
             confidence: (F, V) fraction of the footprint moving per view [1].
             still: the robot is not moving the fingers (arms ``creep`` and ``rotation``).
+            contact: (F,) what keeps a contact [kΩ]:
+                :attr:`tactile.online.OnlineStep.activation_contact` (Σ |activation|), which
+                the shear does not cancel; a contact begins when ``total`` reaches
+                ``contact_kohm`` and lasts while ``contact`` stays at or above it. Default
+                ``total`` (recordings without it).
         """
         c = self.config
+        contact = total if contact is None else contact
         mean = np.asarray(mean, float)
         if self._flow is None:
             self._flow = np.zeros(mean.shape)
@@ -256,7 +263,7 @@ class SlipDetector:
         s.t = float(t)
         s.fired[:] = False
         s.cause[:] = 0
-        ok = np.asarray(processed, bool) & np.isfinite(total)
+        ok = np.asarray(processed, bool) & np.isfinite(total) & np.isfinite(contact)
         ok &= np.isfinite(mean).all(axis=(1, 2)) & np.isfinite(curl).all(axis=1) & np.isfinite(confidence).all(axis=1)
         for f in np.flatnonzero(ok):
             gap = t - self._last_t[f]
@@ -265,7 +272,8 @@ class SlipDetector:
             if gap > c.max_gap_s:
                 self.reset(f)
             self._last_t[f] = t
-            cause = self._finger(f, t, gap, float(total[f]), mean[f], curl[f], confidence[f], still)
+            cause = self._finger(f, t, gap, float(total[f]), float(contact[f]), mean[f], curl[f], confidence[f],
+                                 still)
             s.in_contact[f] = t - self._contact_since[f] >= c.settle_s
             if cause and self.watch[f]:
                 s.fired[f] = True
@@ -274,7 +282,7 @@ class SlipDetector:
                     s.first = (s.t, int(f), cause)
         return s
 
-    def _finger(self, f, t, dt, total, mean, curl, confidence, still) -> int:
+    def _finger(self, f, t, dt, total, contact, mean, curl, confidence, still) -> int:
         c = self.config
         prev = self._prev_total[f]
         self._prev_total[f] = total
@@ -289,7 +297,11 @@ class SlipDetector:
         motion = release_motion(magnitude, level, c.release_motion)   # against the level before this frame
         self._level[f] = np.where(np.isnan(level), magnitude, level + a_noise * (magnitude - level))
         settled = t - self._contact_since[f] >= c.settle_s            # NaN (no contact) compares False
-        if total < c.contact_kohm:
+        # contact begins with a press (the signed total: the real sensors' resting Σ |activation|
+        # reaches 1.2 kΩ without a touch) and lasts while Σ |activation| stays (a growing shear
+        # cancels the signed sum of a finger that still holds)
+        holding = not math.isnan(self._contact_since[f])
+        if (contact if holding else total) < c.contact_kohm:
             self._contact_since[f] = np.nan
         elif math.isnan(self._contact_since[f]):
             self._contact_since[f] = t

@@ -245,3 +245,60 @@ def test_a_give_is_judged_against_the_noise_before_it_not_its_own(fall, tau_fram
         total, mean = _light_contact(seed=seed, fall=fall, tau_frames=tau_frames)
         fired = feed(SlipDetector(1), total, mean=mean)
         assert fired and fired[0][2] == "release" and 9.0 <= fired[0][0] <= 9.04, (seed, fired[:1])
+
+
+def _drifting_grip(T=3000, at=2500):
+    """A finger that presses (signed Σ activation 2.5 kΩ) and then, as the held bottle's weight
+    stretches the skin, drifts to 0.4 kΩ over 20 s (some taxels' impedance rises, others'
+    falls: the signed sum cancels) while Σ |activation| grows from 2.5 to 3.5 kΩ; at frame
+    ``at`` it lets go 30 % of its load, the flow jumping 4× its level for two frames (the
+    simulated gain-3 pour at grip 1.14 rad, 100 ml/min, whose onset came 52 s into the pour).
+    Returns (total (T, 1), contact (T, 1), mean (T, 1, 1, 2))."""
+    rng = np.random.default_rng(7)
+    k = np.arange(T)
+    drift = np.clip((k - 200) / 2000.0, 0.0, 1.0)
+    total = 2.5 - 2.1 * drift + rng.normal(0, 0.005, T)
+    contact = 2.5 + 1.0 * drift + rng.normal(0, 0.005, T)
+    total[at:] -= 0.3 * 2.5
+    contact[at:] *= 0.7
+    mean = np.zeros((T, 1, 1, 2))
+    mean[:, 0, 0, 0] = 0.002 * (1 + 0.5 * rng.standard_normal(T)).clip(0.1)
+    mean[at:at + 2, 0, 0, 0] = 0.008
+    return total[:, None], contact[:, None], mean
+
+
+def feed_contact(det, total, contact, mean):
+    fired = []
+    for i in range(len(total)):
+        s = det.update(i / RATE, [True], total[i], mean[i], np.zeros((1, 1)), np.zeros((1, 1)), contact=contact[i])
+        fired += [(round(i / RATE, 3), CAUSES[s.cause[0]]) for k in np.flatnonzero(s.fired)]
+    return fired
+
+
+def test_a_contact_whose_signed_activation_drifts_below_the_threshold_stays_armed():
+    """Issue 33: the signed Σ activation of a finger holding a loaded object drifts below
+    contact_kohm (the shear cancels it); Σ |activation| does not, and keeps the finger armed,
+    so its give is caught. Armed on the signed sum alone (a recording without the contact
+    measure) the same give is missed."""
+    total, contact, mean = _drifting_grip()
+    fired = feed_contact(SlipDetector(1), total, contact, mean)
+    assert fired and fired[0] == (25.0, "release")
+    assert feed(SlipDetector(1), total, mean=mean) == []           # contact defaults to the signed sum
+
+
+def test_a_contact_begins_with_a_press_not_with_the_resting_spread():
+    """At rest the real BioTac SPs' Σ |activation| reaches 1.2 kΩ (drift and noise summed
+    over 24 taxels, tests/data/biotac_rest_untouched.bag) while the signed sum stays under
+    0.32: a contact begins only when the signed sum reaches contact_kohm, so an untouched
+    finger is never armed whatever its spread."""
+    T = 600
+    rng = np.random.default_rng(1)
+    total = (0.3 + rng.normal(0, 0.01, T))[:, None]
+    contact = (1.2 + rng.normal(0, 0.01, T))[:, None]
+    total[400:] -= 0.2
+    mean = np.zeros((T, 1, 1, 2))
+    mean[:, 0, 0, 0] = 0.002
+    mean[400:402, 0, 0, 0] = 0.02
+    det = SlipDetector(1)
+    assert feed_contact(det, total, contact, mean) == []
+    assert not det.state.in_contact[0]
