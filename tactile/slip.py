@@ -248,8 +248,9 @@ class SlipDetector:
             contact: (F,) what keeps a contact [kΩ]:
                 :attr:`tactile.online.OnlineStep.activation_contact` (Σ |activation|), which
                 the shear does not cancel; a contact begins when ``total`` reaches
-                ``contact_kohm`` and lasts while ``contact`` stays at or above it. Default
-                ``total`` (recordings without it).
+                ``contact_kohm`` and, while ``still``, lasts while ``contact`` stays at or
+                above it (while the robot moves, while ``total`` does). Default ``total``
+                (recordings without it).
         """
         c = self.config
         contact = total if contact is None else contact
@@ -298,10 +299,11 @@ class SlipDetector:
         self._level[f] = np.where(np.isnan(level), magnitude, level + a_noise * (magnitude - level))
         settled = t - self._contact_since[f] >= c.settle_s            # NaN (no contact) compares False
         # contact begins with a press (the signed total: the real sensors' resting Σ |activation|
-        # reaches 1.2 kΩ without a touch) and lasts while Σ |activation| stays (a growing shear
-        # cancels the signed sum of a finger that still holds)
+        # reaches 1.2 kΩ without a touch) and, while the robot is still, lasts while Σ |activation|
+        # stays (a growing shear cancels the signed sum of a finger that still holds); while the
+        # robot moves (the hand opening its grasp) it ends with the signed total, as it begun
         holding = not math.isnan(self._contact_since[f])
-        if (contact if holding else total) < c.contact_kohm:
+        if (contact if holding and still else total) < c.contact_kohm:
             self._contact_since[f] = np.nan
         elif math.isnan(self._contact_since[f]):
             self._contact_since[f] = t
