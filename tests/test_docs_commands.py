@@ -88,6 +88,8 @@ TESTED: dict[str, object] = {
     'pip install ur-rtde==1.6.5': "tests/test_ur10.py::test_connect_identity_and_interface",
     'python -m build': "tests/test_packaging.py::test_the_wheel_holds_one_top_level_name_its_configs_data_and_licence",
     'pytest -m "not soak"': "tests/test_docs_commands.py::test_the_suites_tiers_are_the_ones_the_docs_name",
+    'pytest -q -p no:cacheprovider -m "not soak" tests/test_lab_emulated.py -k "reactive and $src-3.0" -rxX':
+        "tests/test_lab_emulated.py::test_the_emulated_reactive_pour_catches_the_slip_and_holds_the_bottle",
     'pytest -m soak -s tests/test_soak.py': "tests/test_soak.py::test_one_hour_of_sweeps_loses_nothing_with_flat_memory",
     # ------------------------------------------------------------------ python modules and scripts
     'python -X importtime -c "import tactile_flow.protocols.cli, tactile_flow.protocols.run, tactile_flow.analysis.run"':
