@@ -61,6 +61,7 @@ class Analysis:
     contact_method: str = "pressure"     # how contacts were found: pressure | pattern
     slips: dict = field(default_factory=dict)   # segment id → slip estimate (analysis.slip.estimate)
     timing: dict = field(default_factory=dict)
+    plateaus: dict = field(default_factory=dict)  # sweep: (finger, start, stop) → (texture's, width's) TaxelPlateaus
 
 
 def contact_method(prepared: PreparedRun, cfg) -> str:
@@ -213,7 +214,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
               "frames_processed": int(sum(cf.window[1] - cf.window[0] for cf in flows)) * len(model.plans),
               "frames_total": T * len(run.fingers) * len(model.plans)}
     return Analysis(run, prepared, scheme, contacts, thresholds, extrema, bumps, kept, skipped, aggregates,
-                    crossings, pour, whole, flows, method, slips, timing)
+                    crossings, pour, whole, flows, method, slips, timing, plateaus)
 
 
 # ----------------------------------------------------------------------------- aggregates

@@ -88,7 +88,7 @@ def _dragged_crossing(width, drag, heading_deg=0.0, shear_gain=0.0):
 @pytest.mark.parametrize("shear_gain", [0.0, 1.0])
 def test_the_skin_dragged_along_with_the_load_is_taken_off_each_electrode(width, shear_gain):
     """The classic BioTac's widths grew with the shear gain because its front electrodes stay raised
-    after the feature has passed (docs/sensors.md): the same here, 2.4-4.5 mm too wide, and with
+    after the feature has passed (docs/sensors.md): the same here, 3.1-4.9 mm too wide, and with
     each electrode's share of the pad's load taken off (the default width_load_fraction) the
     reading without the drag comes back."""
     from tactile_flow.analysis.config import Estimates
