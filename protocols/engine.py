@@ -99,7 +99,8 @@ class RunContext(Geometry):
             raise ProtectiveStopError("arm: protective stop")
         self.interlocks.check(self.lab, self.recorder)
         if self.live is not None:
-            self.live.poll(still=self.clock.now() >= self.hand_until and not self.lab.arm.is_moving())
+            hand_still = self.clock.now() >= self.hand_until
+            self.live.poll(still=hand_still and not self.lab.arm.is_moving(), hand_still=hand_still)
 
     def hand_move(self, targets: dict[str, float], duration: float) -> None:
         """Command hand joints (rad) over ``duration`` s without waiting; remembered as the

@@ -152,6 +152,7 @@ class LiveMonitor:
         self._next_display = -math.inf
         self.frames = 0
         self.still = True
+        self.hand_still = True
         self._step = None                               # the newest OnlineStep
         self._newest_seq = None                         # highest frame number seen
         self._behind = 0                                # frames in a row numbered below it
@@ -213,10 +214,13 @@ class LiveMonitor:
         self._device_offset = min(self._device_offset, received - d)
         return d + self._device_offset
 
-    def poll(self, still: bool | None = None):
-        """Process every frame received since the last call; returns the detector's state."""
+    def poll(self, still: bool | None = None, hand_still: bool | None = None):
+        """Process every frame received since the last call; returns the detector's state.
+        ``still``: neither arm nor hand moves; ``hand_still``: the hand does not (default: as
+        ``still``)."""
         if still is not None:
             self.still = still
+            self.hand_still = still if hand_still is None else hand_still
         frames = self.tap.drain()
         if self.flow is None:                          # tare: accumulate the rest impedance
             for fr in frames:
@@ -253,7 +257,8 @@ class LiveMonitor:
             c1 = time.perf_counter()
             mean = np.stack([step.mean_col, step.mean_row], axis=-1)
             state = self.detector.update(t_frame, step.processed, step.activation_total, mean, step.curl,
-                                         step.confidence, still=self.still, contact=step.activation_contact)
+                                         step.confidence, still=self.still, contact=step.activation_contact,
+                                         hand_still=self.hand_still)
             c2 = time.perf_counter()
             cols["time_live"][i], cols["seq"][i] = t, fr.seq
             cols["processed_time"][i] = self.clock.now() - t0

@@ -37,7 +37,9 @@ steady contact for ``settle_s``):
 
 ``creep`` and ``rotation`` are flow the robot's own motion also makes (a finger swept on
 purpose across a surface slides and creeps): they only count while the robot is still
-(the ``still`` argument of :meth:`SlipDetector.update`). ``release`` needs no such gate.
+(the ``still`` argument of :meth:`SlipDetector.update`). ``release`` only waits while the
+hand itself moves by command (``hand_still``: opening the grasp lets the load go by command);
+the arm's motion does not gate it.
 
 A finger whose stream pauses for more than ``max_gap_s`` (skipped, corrupt or missing
 frames) starts again from scratch: it must settle in contact anew before it can fire, so a
@@ -233,7 +235,7 @@ class SlipDetector:
             self._curl[finger] = 0.0
 
     def update(self, t: float, processed, total, mean, curl, confidence, still: bool = True,
-               contact=None) -> SlipState:
+               contact=None, hand_still: bool = True) -> SlipState:
         """Take one frame's aggregates; return the (reused) :class:`SlipState`.
 
         Args:
@@ -251,6 +253,9 @@ class SlipDetector:
                 ``contact_kohm`` and, while ``still``, lasts while ``contact`` stays at or
                 above it (while the robot moves, while ``total`` does). Default ``total``
                 (recordings without it).
+            hand_still: the hand is not moving by command. While it moves (opening or closing
+                the grasp) the fingertips' load changes by command: a fall then is the robot's
+                own release, and ``release`` does not fire (the arm's motion does not gate it).
         """
         c = self.config
         contact = total if contact is None else contact
@@ -274,7 +279,7 @@ class SlipDetector:
                 self.reset(f)
             self._last_t[f] = t
             cause = self._finger(f, t, gap, float(total[f]), float(contact[f]), mean[f], curl[f], confidence[f],
-                                 still)
+                                 still, hand_still)
             s.in_contact[f] = t - self._contact_since[f] >= c.settle_s
             if cause and self.watch[f]:
                 s.fired[f] = True
@@ -283,7 +288,7 @@ class SlipDetector:
                     s.first = (s.t, int(f), cause)
         return s
 
-    def _finger(self, f, t, dt, total, contact, mean, curl, confidence, still) -> int:
+    def _finger(self, f, t, dt, total, contact, mean, curl, confidence, still, hand_still=True) -> int:
         c = self.config
         prev = self._prev_total[f]
         self._prev_total[f] = total
@@ -334,7 +339,7 @@ class SlipDetector:
         ratios[2] = np.abs(self._curl[f]).max() / c.curl_min
         if not settled:
             return 0
-        for cause in (1, 2, 3) if still else (1,):
+        for cause in (1, 2, 3) if still else (1,) if hand_still else ():
             if ratios[cause - 1] >= 1.0:
                 return cause
         return 0

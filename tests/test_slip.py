@@ -306,3 +306,22 @@ def test_a_contact_begins_with_a_press_not_with_the_resting_spread():
     det = SlipDetector(1)
     assert feed_contact(det, total, contact, mean) == []
     assert not det.state.in_contact[0]
+
+
+def test_the_hands_own_opening_is_not_a_release():
+    """While the hand moves by command (opening the grasp: the load goes by command) a fall is
+    the robot's own release: it does not fire; the same fall with the hand still does, and the
+    arm's motion alone does not gate it."""
+    total = grip()
+    total[120:] *= 0.78
+    conf = np.zeros((200, 1, 1))
+    conf[120:123] = 0.5
+    mean = np.zeros((200, 1, 1, 2))
+    det = SlipDetector(1)
+    fired = []
+    for i in range(200):
+        s = det.update(i / RATE, [True], total[i], mean[i], np.zeros((1, 1)), conf[i], still=False,
+                       hand_still=i < 110)
+        fired += [i for k in np.flatnonzero(s.fired)]
+    assert fired == []
+    assert feed(SlipDetector(1), total, confidence=conf, still=False)[0] == (1.2, 0, "release")
