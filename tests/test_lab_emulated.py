@@ -250,7 +250,7 @@ def _released_bottle(emulator, before: int) -> dict:
     pytest.param(3.0, marks=pytest.mark.xfail(
         strict=False, reason="issue 33, known: at gain 3 the thumb's first give is 15-17 % over 4 frames, about 7 "
                              "times its own 4-frame noise, so it reaches 0.7-1.1 of the release threshold (the noise "
-                             "term decides, not release_drop); held in 5 of 16 runs at load 10 (docs/live.md)")),
+                             "term decides, not release_drop); held in 9 of 24 runs (docs/live.md)")),
     12.0])
 @pytest.mark.parametrize("biotac_source", ["rosbridge", "serial"])
 def test_the_emulated_reactive_pour_catches_the_slip_and_holds_the_bottle(emulated_worlds, biotac_source, gain,
