@@ -52,6 +52,7 @@ class Estimates:
     width_signal: str = spec("taxels", choices=("taxels", "proxy", "pdc"))
     width_level: float = spec(0.5, gt=0, lt=1)
     width_taxel_fraction: float = spec(0.3, gt=0, le=1)
+    width_load_fraction: float = spec(0.15, ge=0, lt=1)
     texture_angle: str = spec("passing", choices=("passing", "frame"))
     texture_taxel_fraction: float = spec(0.1, gt=0, le=1)
     texture_max_uncertainty_deg: float = spec(15.0, gt=0)

@@ -100,7 +100,34 @@ class TaxelPlateaus:
                              self.rise_fraction[k])
 
 
-def taxel_plateaus(activation, t, speed, level: float, strong: float) -> TaxelPlateaus | None:
+def remove_load_share(activation, load_fraction: float) -> np.ndarray:
+    """The activation (n, N) less each electrode's share of the contact's load: ``a − L·c``.
+
+    Why: dragging the skin over a feature stretches it for as long as the contact carries load,
+    not only while the feature is under an electrode: the electrodes ahead of the contact's
+    centre stay raised after the feature has passed them (the skin dragged along behind it), those
+    behind it dip before it arrives. That share follows the load on the whole pad, ``L(t)`` = the
+    sum over the electrodes, with one factor per electrode ``c`` (positive ahead, negative behind):
+    on the classic BioTac at shear gain 12 it stretched the front electrode's plateau over a 6 mm
+    straw to 8.5 mm (5.4 mm at gain 3). ``c`` is each electrode's smallest ratio ``a / L`` over
+    the frames where ``L`` is at least ``load_fraction`` of its largest value: where the feature is
+    away from the electrode, its own pressure adds nothing, so that ratio is the share alone
+    (the feature's pressure only ever adds). Nothing depends on the signal's scale (ratios of the
+    activation to its own sum). ``load_fraction`` 0: the activation unchanged.
+    """
+    a = np.asarray(activation, float)
+    if not load_fraction > 0 or a.ndim != 2 or len(a) == 0:
+        return a
+    load = a.sum(axis=1)
+    if not load.max() > 0:
+        return a
+    loaded = load >= load_fraction * load.max()
+    share = (a[loaded] / load[loaded, None]).min(axis=0)
+    return a - load[:, None] * share[None, :]
+
+
+def taxel_plateaus(activation, t, speed, level: float, strong: float,
+                   load_fraction: float = 0.0) -> TaxelPlateaus | None:
     """The plateau of every electrode that feels a crossed feature.
 
     ``activation``: (n, N) smoothed activation of one finger's electrodes over the crossing (any
@@ -109,8 +136,10 @@ def taxel_plateaus(activation, t, speed, level: float, strong: float) -> TaxelPl
     its first value, last value and 0) is at least ``strong`` × the largest rise; its plateau is
     where its activation stays above ``level`` of its own rise. ``None`` if nothing rose.
     Nothing depends on the signal's scale: both thresholds are fractions of the signal's own rise.
+    ``load_fraction`` > 0: each electrode's share of the pad's load is taken off first
+    (:func:`remove_load_share`), the skin's stretch that outlasts the feature.
     """
-    a = np.asarray(activation, float)
+    a = remove_load_share(activation, load_fraction)
     tt = np.asarray(t, float)
     v = np.asarray(speed, float)
     if a.ndim != 2 or len(a) < 3:
@@ -133,7 +162,8 @@ def taxel_plateaus(activation, t, speed, level: float, strong: float) -> TaxelPl
                          np.interp(hi, idx, tt) - np.interp(lo, idx, tt), rise[used] / rise.max())
 
 
-def feature_width_per_taxel(activation, t, speed, level: float, min_speed: float, strong: float = 0.3):
+def feature_width_per_taxel(activation, t, speed, level: float, min_speed: float, strong: float = 0.3,
+                            load_fraction: float = 0.0):
     """Width (mm) of a crossed feature read on each electrode that feels it, not on their sum.
 
     Arguments as :func:`taxel_plateaus`; the width is the median over those electrodes of the
@@ -148,7 +178,7 @@ def feature_width_per_taxel(activation, t, speed, level: float, min_speed: float
     that shape with the sensor's shear gain. One electrode sees the feature through its own
     footprint only.
     """
-    return width_from_plateaus(taxel_plateaus(activation, t, speed, level, strong), speed, min_speed)
+    return width_from_plateaus(taxel_plateaus(activation, t, speed, level, strong, load_fraction), speed, min_speed)
 
 
 def width_from_plateaus(plateaus: TaxelPlateaus | None, speed, min_speed: float):

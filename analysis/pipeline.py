@@ -61,6 +61,7 @@ class Analysis:
     contact_method: str = "pressure"     # how contacts were found: pressure | pattern
     slips: dict = field(default_factory=dict)   # segment id → slip estimate (analysis.slip.estimate)
     timing: dict = field(default_factory=dict)
+    plateaus: dict = field(default_factory=dict)  # sweep: (finger, start, stop) → (texture's, width's) TaxelPlateaus
 
 
 def contact_method(prepared: PreparedRun, cfg) -> str:
@@ -213,7 +214,7 @@ def analyse(run: RunData, cfg, model=None) -> Analysis:
               "frames_processed": int(sum(cf.window[1] - cf.window[0] for cf in flows)) * len(model.plans),
               "frames_total": T * len(run.fingers) * len(model.plans)}
     return Analysis(run, prepared, scheme, contacts, thresholds, extrema, bumps, kept, skipped, aggregates,
-                    crossings, pour, whole, flows, method, slips, timing)
+                    crossings, pour, whole, flows, method, slips, timing, plateaus)
 
 
 # ----------------------------------------------------------------------------- aggregates
@@ -291,9 +292,11 @@ def _speed(run):
 
 
 def _electrode_plateaus(run, cfg, prepared, bumps, rate) -> dict:
-    """(finger, bump start, bump stop) → the plateaus of the pad electrodes that felt the crossing
-    (:func:`estimates.taxel_plateaus`, read once at the lower of the width's and the texture
-    angle's fractions; ``None`` when nothing rose); empty without a TCP speed."""
+    """(finger, bump start, bump stop) → (texture's, width's) plateaus of the pad electrodes that
+    felt the crossing (:func:`estimates.taxel_plateaus`; ``None`` when nothing rose); empty
+    without a TCP speed. The texture angle's are read on the activation, at texture_taxel_fraction;
+    the width's on it less each electrode's share of the pad's load (width_load_fraction: the
+    skin's stretch that outlasts the feature), at width_taxel_fraction."""
     e = cfg.estimates
     speed = _speed(run)
     if speed is None:
@@ -306,18 +309,20 @@ def _electrode_plateaus(run, cfg, prepared, bumps, rate) -> dict:
             for b in bl:
                 act = seg.smooth(np.asarray(prepared.activation[b.start:b.stop, k], float)[:, pad], rate,
                                  cfg.segmentation.smooth_s)
-                out[(f, b.start, b.stop)] = est.taxel_plateaus(
-                    act, run.time[b.start:b.stop], speed[b.start:b.stop], e.width_level,
-                    min(e.texture_taxel_fraction, e.width_taxel_fraction))
+                t, v = run.time[b.start:b.stop], speed[b.start:b.stop]
+                out[(f, b.start, b.stop)] = (
+                    est.taxel_plateaus(act, t, v, e.width_level, e.texture_taxel_fraction),
+                    est.taxel_plateaus(act, t, v, e.width_level, e.width_taxel_fraction, e.width_load_fraction))
     return out
 
 
-def _plateau_frames(every, cfg, rate) -> float | None:
+def _plateau_frames(read, cfg, rate) -> float | None:
     """How long (frames) a crossing's ``during`` lasts when widths are read per electrode: the
-    median plateau of the width's electrodes; None (the pad sum's plateau) otherwise."""
-    if cfg.estimates.width_signal != "taxels" or every is None:
+    median plateau of the width's electrodes (``read``: :func:`_electrode_plateaus`' pair);
+    None (the pad sum's plateau) otherwise."""
+    if cfg.estimates.width_signal != "taxels" or read is None or read[1] is None:
         return None
-    return float(np.median(every.strong(cfg.estimates.width_taxel_fraction).duration_s)) * rate
+    return float(np.median(read[1].duration_s)) * rate
 
 
 def _crossings(run, cfg, prepared, bumps, plateaus, flows, model, rate, skipped) -> list[dict]:
@@ -362,13 +367,10 @@ def _crossings(run, cfg, prepared, bumps, plateaus, flows, model, rate, skipped)
                 row["direction_world"] = d_w
                 passing = None
                 if speed is not None:
-                    # read once (_electrode_plateaus); each reading keeps its own electrodes
-                    every = plateaus.get((f, b.start, b.stop))
-                    passing = None if every is None else every.strong(e.texture_taxel_fraction)
+                    # read once (_electrode_plateaus): the texture's and the width's
+                    passing, widths = plateaus.get((f, b.start, b.stop), (None, None))
                     if e.width_signal == "taxels":
-                        width, dur, v, _ = est.width_from_plateaus(
-                            None if every is None else every.strong(e.width_taxel_fraction),
-                            speed[b.start:b.stop], e.min_speed_mm_s)
+                        width, dur, v, _ = est.width_from_plateaus(widths, speed[b.start:b.stop], e.min_speed_mm_s)
                     else:
                         width, dur, v = est.feature_width(sig, b, run.time, speed, cfg.segmentation.plateau_level,
                                                           e.min_speed_mm_s)

@@ -112,6 +112,8 @@ TESTED: dict[str, object] = {
         "tests/test_warmup.py::test_a_first_analysis_compiles_in_children_and_then_nothing_itself",
     'python benchmarks/bench_analysis.py': BENCH,
     'python benchmarks/bench_catalogue.py': BENCH,
+    'python benchmarks/bench_widths.py': BENCH,
+    'python benchmarks/bench_widths.py --sensor biotac --gains 3 12 --seeds 0 --electrodes': BENCH,
     'python benchmarks/bench_import.py': BENCH,
     'python benchmarks/bench_kill.py': BENCH,
     'python benchmarks/bench_kill.py --trials 10': BENCH,

@@ -103,3 +103,18 @@ def test_classic_biotacs_at_the_realistic_shear_gain_keep_the_targets(tmp_path, 
     score = json.loads((tmp_path / "run" / "score.json").read_text())
     for key in targets:
         assert score["targets"][key]["met"], (key, score["targets"])
+
+
+@pytest.mark.parametrize("protocol, gain", [("straws_sweep", 12), ("sticks_sweep", 6)])
+def test_classic_biotacs_read_widths_within_the_target_at_a_high_shear_gain(tmp_path, protocol, gain):
+    """`tactile-run sensor=biotac protocol=P hardware.sensor.shear_kohm_per_n=G`: the skin's stretch
+    that outlasts a feature (each electrode's share of the pad's load) is taken off before its
+    plateau is read (before: straws at gain 12 1.32 mm off, sticks at gain 6 1.20 mm; the target
+    1 mm)."""
+    proc = command("protocols.cli", tmp_path, "sensor=biotac", f"protocol={protocol}",
+                   f"hardware.sensor.shear_kohm_per_n={gain}", "progress=false", "analysis.figures=false",
+                   f"hydra.run.dir={tmp_path / 'run'}", timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    score = json.loads((tmp_path / "run" / "score.json").read_text())
+    assert score["all_targets_met"] is True, score["targets"]
+    assert score["summary"]["width_error_mm_median"] <= 1.0

@@ -8,7 +8,6 @@ emulator thread inside the client's process can deadlock. Every emulator's wrapp
 from __future__ import annotations
 
 import math
-
 import os
 import queue
 import signal

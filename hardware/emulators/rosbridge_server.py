@@ -123,9 +123,8 @@ class BiotacSource:
 
         self.connected = [f for f in FINGERS if f not in unconnected]
         F = len(self.connected)
-        self.model = BiotacModel(self.connected, model_config or sensor_model_config(), np.random.default_rng(seed),
-                                 1.0 / rate_hz,
-                                 sensor)
+        self.model = BiotacModel(self.connected, model_config or sensor_model_config(),
+                                 np.random.default_rng(seed), 1.0 / rate_hz, sensor)
         self.inputs = SensorInputs(np.zeros((F, self.model.N)), np.zeros(F), np.zeros(F), np.zeros(F))
         self.touch = touch
         self.seq = 0
