@@ -467,7 +467,7 @@ def _onset(pm, end: int, turned, slip_class: str | None) -> dict | None:
         return None
     return {"signal": what, "motion_frame": k.motion, "slip_frame": k.slip,
             "uncertainty_frames": max(0.5, (k.slip_hi - k.slip_lo) / 2.0), "slowed": k.slowed,
-            "rise": k.rise, "dated_by": "knee"}
+            "rise": k.rise, "dated_by": "knee", "release_from": k.wide_lo}
 
 
 def _release(when: dict, raw, n_ref: int, rate: float, along=None) -> None:
@@ -489,7 +489,13 @@ def _release(when: dict, raw, n_ref: int, rate: float, along=None) -> None:
     onset: a ratio to the signal's own noise, whatever the sensor's shear gain) marks it (a press that settles, or the
     holder's wander, lowers the load too, but not from the top of a stretch): the slip onset is
     the frame before the fall (uncertainty: the fall's length). Without such a fall the knee
-    stands."""
+    stands. A fall is a release only from ``when["release_from"]`` on, the knee's earliest slip
+    onset at two standard errors: before it the motion went on at the stuck skin's pace, so the
+    skin had not broken away (a faint twist's noise falls on the way up). For a translation a
+    fall from within :data:`RELEASE_NEAR` of the rise below the running high counts too: a pull's
+    stretch can ease off its high for a few frames before the skin breaks away (a firm pull on
+    the cylinder), and its release is tens of times its noise; a faint twist's plateau wanders
+    by its noise, so a twist's release is a fall from a new high."""
     ref = raw[:n_ref].mean(axis=0)
     along = _shape_change(along, ref)
     if along is not None:
@@ -509,13 +515,15 @@ def _release(when: dict, raw, n_ref: int, rate: float, along=None) -> None:
     horizon = min(len(smooth), when["slip_frame"] + int(round(RELEASE_AFTER_S * rate)) + 1)
     fall = max(1, int(round(RELEASE_FRAMES)))
     top = float(smooth[start:horizon].max()) - smooth[start]
-    for i in range(start + 1, horizon - 1):
+    near = RELEASE_NEAR if when.get("signal") == "displacement" else 0.0
+    earliest = when.get("release_from", 0)
+    for i in range(max(start + 1, earliest - 1), horizon - 1):
         rise = smooth[i] - smooth[start]
         drop = smooth[i] - smooth[i + 1:i + 1 + fall].min()
-        if rise >= RELEASE_HEIGHT * top > 0 and smooth[i] >= smooth[start:i + 1].max() and \
+        if rise >= RELEASE_HEIGHT * top > 0 and rise >= (1.0 - near) * (smooth[start:i + 1].max() - smooth[start]) and \
                 drop >= max(RELEASE_SHARE * rise, RELEASE_NOISE * noise):
             bottom = i + 1 + int(np.argmin(smooth[i + 1:i + 1 + fall]))
-            when.update(slip_frame=i + 1, uncertainty_frames=max(1.0, (bottom - i) / 2.0), dated_by="release")
+            when.update(slip_frame=i + 1, uncertainty_frames=max(1.0, float(bottom - i)), dated_by="release")
             return
 
 
@@ -548,5 +556,7 @@ RELEASE_NOISE = 4.0
 RELEASE_FRAMES = 3
 RELEASE_AFTER_S = 0.4
 """The release is looked for up to this long after the knee (the knee lands early on a partial slip)."""
+RELEASE_NEAR = 0.1
+"""A translation's release may fall from this fraction of its rise below the running high (:func:`_release`)."""
 
 

@@ -19,7 +19,9 @@ Uncertainty: the knots whose fit is within one standard error of the best —
 ``SSE(b) ≤ SSE_min + σ²·L``, σ² the residual variance and L the residuals' correlation length
 in frames (the smoothing makes neighbouring residuals alike, so L frames carry one
 independent sample) — spread over ``[b_lo, b_hi]``; the uncertainty is half that width, at
-least half a frame.
+least half a frame. The knots within two standard errors (``SSE(b) ≤ SSE_min + 4σ²·L``) spread
+over ``[wide_lo, wide_hi]``: where the slip onset may lie at all (a release dated before
+``wide_lo`` contradicts the fit: the signal went on at its ramp's pace after it).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ class Knee:
         ramp_slope, after_slope: the signal's slope on the ramp and after the knee (units/frame).
         rise: the ramp's height ``s₁·(b − a)`` (signal units).
         slowed: the fit slowed down after the ramp (``|s₂| < SLOWER·|s₁|``).
+        wide_lo, wide_hi: the frames the slip onset may lie between at two standard errors.
     """
 
     motion: int
@@ -53,6 +56,8 @@ class Knee:
     after_slope: float
     rise: float
     slowed: bool
+    wide_lo: int = 0
+    wide_hi: int = 0
 
 
 def correlation_length(r) -> float:
@@ -118,11 +123,24 @@ def knee(y, min_ramp: int = 2, coarse: int = 60) -> Knee | None:
     i = np.arange(n, dtype=float)
     fit = coef[k, 0] + s1 * np.clip(i - ka, 0.0, kb - ka) + s2 * np.maximum(i - kb, 0.0)
     sigma2 = float(sse[k]) / max(n - 5, 1)
-    band = sse <= sse[k] + sigma2 * correlation_length(y - fit)
+    corr = correlation_length(y - fit)
+    band = sse <= sse[k] + sigma2 * corr
     slowed = abs(s2) < SLOWER * abs(s1)
     still_ramp = abs(s1) < SLOWER * abs(s2)          # the "ramp" is still: the motion begins at b
     where = b if (slowed or still_ramp) else a
     motion = kb if still_ramp else ka
+    level = sse[k] + 4.0 * sigma2 * corr
+    wide_lo, wide_hi = int(where[sse <= level].min()), int(where[sse <= level].max())
+    if step > 1:
+        # the two-standard-error band frame by frame: the slip knot over the coarse band's span,
+        # the other knot over every frame (the coarse grid's band is a step wide at either end)
+        span = np.arange(max(0, wide_lo - 2 * step), min(n - 1, wide_hi + 2 * step + 1))
+        every = np.arange(0, n - 1)
+        wa, wb = _pairs(every, span, min_ramp) if where is b else _pairs(span, every, min_ramp)
+        wsse, _ = _fits(y, wa, wb)
+        w = (wb if where is b else wa)[wsse <= level]
+        if len(w):
+            wide_lo, wide_hi = min(wide_lo, int(w.min())), max(wide_hi, int(w.max()))
     return Knee(motion=motion, slip=kb if (slowed or still_ramp) else ka, slip_lo=int(where[band].min()),
                 slip_hi=int(where[band].max()), ramp_slope=float(s1), after_slope=float(s2),
-                rise=float(s1 * (kb - ka)), slowed=bool(slowed))
+                rise=float(s1 * (kb - ka)), slowed=bool(slowed), wide_lo=wide_lo, wide_hi=wide_hi)

@@ -36,7 +36,8 @@ real touches), then markdown tables (docs/analysis.md):
   end values less what a pull's spurious turn explains (the pulls' median |turn| per mm of the
   grid × the displacement) — each class's share read right, with its count;
 - the slip onset's error against the truth's (ms): within 50 ms, median, 90th and 95th percentiles of
-  its magnitude.
+  its magnitude, and how many of the dated slips have the truth within ± their
+  ``slip_onset_uncertainty_s`` (is the uncertainty honest).
 """
 
 from __future__ import annotations
@@ -193,7 +194,11 @@ def summarise(rows, cfg, bins, per_mm=None) -> dict:
             if c.motion != "none" and est and est.get("slip_onset_s") is not None
             and tr.get("true_slip_onset_s") is not None and math.isfinite(tr["true_slip_onset_s"])]
     slips = sum(c.motion != "none" for c, *_ in rows)
-    out["onset"] = {"slips": slips, "dated": len(errs),
+    inside = [abs(est["slip_onset_s"] - tr["true_slip_onset_s"]) <= est["slip_onset_uncertainty_s"]
+              for c, tr, est in rows if c.motion != "none" and est and est.get("slip_onset_s") is not None
+              and est.get("slip_onset_uncertainty_s") is not None
+              and tr.get("true_slip_onset_s") is not None and math.isfinite(tr["true_slip_onset_s"])]
+    out["onset"] = {"slips": slips, "dated": len(errs), "within_uncertainty": int(sum(inside)),
                     "within_50ms": (float(np.sum(np.abs(errs) <= 50.0)) / slips) if slips else None,
                     "median_ms": float(np.median(errs)) if errs else None,
                     "abs_q90_ms": float(np.percentile(np.abs(errs), 90)) if errs else None,
@@ -350,7 +355,8 @@ def bench(args, sensor: str) -> None:
     print(f"\nslip onset: {o['dated']} of {o['slips']} slips dated; within 50 ms of the truth: {fmt(o['within_50ms'])}; "
           f"median error {o['median_ms'] if o['median_ms'] is None else round(o['median_ms'], 1)} ms; "
           f"90th percentile of |error| {o['abs_q90_ms'] if o['abs_q90_ms'] is None else round(o['abs_q90_ms'], 1)} ms; "
-          f"95th {o['abs_q95_ms'] if o['abs_q95_ms'] is None else round(o['abs_q95_ms'], 1)} ms")
+          f"95th {o['abs_q95_ms'] if o['abs_q95_ms'] is None else round(o['abs_q95_ms'], 1)} ms; "
+          f"the truth within ± slip_onset_uncertainty_s: {o['within_uncertainty']} of {o['dated']}")
     if touch:
         for kind, r in touch.items():
             print(f"real touches ({kind}): {r['records']} records, read as touch {fmt(r['touch_rate'])} ({r['read_as']})")

@@ -464,6 +464,19 @@ def test_a_firm_tared_pull_at_the_shear_the_real_frames_allow_is_dated_at_its_re
 
 
 @pytest.mark.slow
+def test_a_firm_pull_whose_stretch_eased_off_its_high_is_dated_at_its_release(tmp_path):
+    """Seed 1's firm (5 N) pull at 120° on the cylinder without tare, at shear gain 3 kΩ/N: the
+    stretch eases off its high for four frames before the skin breaks away (916 → 876 × its noise,
+    then a fall of 221 × its noise in one frame). A release had to fall from a new high, so none
+    was found and the knee, 78 ms early, dated it; a fall from within a tenth of the rise below
+    the high counts for a translation, and dates it within 50 ms of the breakaway."""
+    c = Condition("translate", direction_deg=120.0, press_force=5.0, surface="cylinder", tare=False)
+    slip, truth = _slip_of(tmp_path, c, seed=1, overrides=GAIN_3)
+    assert slip["slip_class"] == "translation" and slip["evidence"]["onset"]["dated_by"] == "release", slip
+    assert abs(slip["slip_onset_s"] - truth["true_slip_onset_s"]) <= 0.05, (slip["slip_onset_s"], truth)
+
+
+@pytest.mark.slow
 def test_a_light_pull_on_the_cylinder_under_the_holders_tremor_reads_as_a_pull(tmp_path):
     """Seed 1's light pull at 180° on the cylinder with a tare: the holder's tremor at touchdown
     had left the skin stretched by ~0.02 mm at the full press's stiffness, whose shear loads

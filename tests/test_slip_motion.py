@@ -261,3 +261,74 @@ def test_a_still_contact_turned_late_is_read_by_its_end_values():
     rotation = {"rotation_deg": -0.92, "peak_deg": -0.75}
     assert turn(0.85, rotation, cfg) == (-0.92, "end")
     assert classify(0.85, rotation, 3.43, None, cfg)[0] == "rotation"
+
+
+def test_the_knees_wide_band_holds_its_one_standard_error_band_and_the_truth():
+    rng = np.random.default_rng(1)
+    t = np.arange(250)
+    y = 0.8 * np.clip((t - 60) / 40, 0, 1) + rng.normal(0, 0.03, len(t))
+    k = knee(y)
+    assert k.wide_lo <= k.slip_lo <= k.slip <= k.slip_hi <= k.wide_hi
+    assert k.wide_lo <= 100 <= k.wide_hi and k.wide_hi - k.wide_lo <= 30
+
+
+def _light_twist_with_a_noise_fall(seed: int):
+    """A light twist at the shear the real contact frames allow: its pattern turns 0.6° from
+    frame 20 to the skin's release at frame 70, then holds (the turn's knee is clear), while the
+    electrodes' twist pattern (1/10 of the stuck skin's quadrant loads of the tests above) is
+    let go by only 1.5 × their noise at the release — and a noise fall of 6 × the projected
+    noise lands at frame 45, on the way up. Returns (turn (N,) deg, raw (N, n) kΩ, along (n,))."""
+    rng = np.random.default_rng(seed)
+    base = blob((0.0, 0.0), sigma=(4.0, 2.5))
+    twist = 0.3 * (blob((0.0, 0.0), sigma=(4.0, 2.5), angle_deg=8.0) - base)
+    unit = twist / np.linalg.norm(twist)
+    held = lambda i: 0.0 if i < 20 else ((i - 20) / 50 if i < 70 else 0.97)            # noqa: E731
+    noise = 0.02
+    raw = np.stack([base + held(i) * twist + rng.normal(0.0, noise, len(base)) for i in range(160)])
+    raw[46:48] -= 6.0 * noise * unit * np.sqrt(2)                     # two frames down: a noise fall
+    turn = np.array([0.6 * min(max(i - 20, 0) / 50, 1.0) for i in range(160)]) + rng.normal(0, 0.01, 160)
+    return turn, raw, held(60) * twist
+
+
+def test_a_noise_fall_before_the_turn_slowed_is_not_the_twists_release():
+    """The light twist above, dated as ``analysis.slip.estimate`` does: the knee of its turn
+    (frame 70), then the release looked for on the electrodes' twist pattern. The noise fall at
+    frame 45 comes while the turn still ramps at the stuck skin's pace, before the knee's
+    earliest slip onset at two standard errors: not a release. Without that bound it was taken
+    (150–250 ms early). Noise falls after the knee are still taken as the release where they pass
+    4 × the noise (2 of these 6 draws, 140 and 260 ms late): what is left at gain 3."""
+    from types import SimpleNamespace
+
+    from tactile_flow.analysis.slip import _onset, _release
+    dated, unbounded_dated = [], []
+    for seed in range(6):
+        turn, raw, along = _light_twist_with_a_noise_fall(seed)
+        pm = SimpleNamespace(displacement=np.zeros((len(turn), 2)))
+        when = _onset(pm, len(turn), turn, "rotation")
+        assert when["signal"] == "rotation" and when["release_from"] > 46
+        unbounded = {**when, "release_from": 0}
+        _release(when, raw, 10, 100.0, along)
+        _release(unbounded, raw, 10, 100.0, along)
+        dated.append(abs(when["slip_frame"] - 70) <= 5)             # within 50 ms
+        unbounded_dated.append(abs(unbounded["slip_frame"] - 70) <= 5)
+    assert sum(dated) >= 4, dated
+    assert sum(unbounded_dated) <= 1, unbounded_dated          # the bound is what dates them
+
+
+def test_a_pulls_release_may_fall_from_just_below_its_high():
+    """A firm pull's stretch eases off its high (frames 60–64, by 2 % of its rise a frame) before
+    the skin breaks away at frame 65 with a fall of a fifth of the rise: the release, though not
+    from a new high. A twist's release still has to fall from a new high (its plateau wanders by
+    its noise)."""
+    from tactile_flow.analysis.slip import _release
+    rng = np.random.default_rng(2)
+    base = blob((0.0, 0.0))
+    stretch = blob((1.0, 0.0)) - base
+    level = lambda i: 0.0 if i < 20 else ((i - 20) / 40 if i < 60 else (1.0 - 0.02 * (i - 60) if i < 65 else 0.7))  # noqa: E731
+    raw = np.stack([base + level(i) * stretch + rng.normal(0.0, 0.01, len(base)) for i in range(140)])
+    pull = {"motion_frame": 20, "slip_frame": 58, "uncertainty_frames": 1.0, "signal": "displacement"}
+    _release(pull, raw, 10, 100.0, level(58) * stretch)
+    assert pull["dated_by"] == "release" and abs(pull["slip_frame"] - 65) <= 3, pull
+    twist = {**{k: v for k, v in pull.items() if k != "dated_by"}, "slip_frame": 58, "signal": "rotation"}
+    _release(twist, raw, 10, 100.0, level(58) * stretch)
+    assert twist.get("dated_by") != "release" or abs(twist["slip_frame"] - 65) > 3
