@@ -101,7 +101,7 @@ def _live_block(chunk: int) -> Block:
         Var("seq", T, "i8", "1", "BioTac frame sequence number (joins biotac/seq)"),
         Var("processed", TF, "bool", "1", "the finger's sample was valid and processed (else skipped: NaN values)"),
         Var("activation_total", TF, "f8", "kOhm", "sum of the Kalman-filtered taxel activations (PDC proxy)"),
-        Var("activation_contact", TF, "f8", "kOhm", "sum of their absolute values (what the slip detector arms on)"),
+        Var("activation_contact", TF, "f8", "kOhm", "sum of their absolute values (keeps a pressed finger armed while the robot is still)"),
         *(Var(name, TFV, "f8", units, long) for name, units, long in per_view),
         Var("slip_fired", TF, "bool", "1", "the slip detector fired for the finger in this frame"),
         Var("slip_cause", TF, "i1", "1", "what fired: 0 none, 1 release, 2 creep, 3 rotation (tactile.slip.CAUSES)"),
