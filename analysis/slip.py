@@ -520,7 +520,8 @@ def _release(when: dict, raw, n_ref: int, rate: float, along=None) -> None:
     for i in range(max(start + 1, earliest - 1), horizon - 1):
         rise = smooth[i] - smooth[start]
         drop = smooth[i] - smooth[i + 1:i + 1 + fall].min()
-        if rise >= RELEASE_HEIGHT * top > 0 and rise >= (1.0 - near) * (smooth[start:i + 1].max() - smooth[start]) and \
+        high = smooth[start:i + 1].max() - smooth[start]                  # the running high so far
+        if rise >= RELEASE_HEIGHT * top > 0 and rise >= (1.0 - near) * high and \
                 drop >= max(RELEASE_SHARE * rise, RELEASE_NOISE * noise):
             bottom = i + 1 + int(np.argmin(smooth[i + 1:i + 1 + fall]))
             when.update(slip_frame=i + 1, uncertainty_frames=max(1.0, float(bottom - i)), dated_by="release")

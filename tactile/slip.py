@@ -13,9 +13,10 @@ steady contact for ``settle_s``):
     ``release_drop`` of its value *and* by more than ``release_noise`` times that same
     n-frame fall's own usual size on this finger (an EMA, ``noise_tau_s``, of its absolute
     value, as it was before the window, like the trend: a give spread over its first frames
-    must not raise its own reference; :func:`release_ratio`; the filtered activation's noise is correlated from frame
-    to frame, so it is measured over the window, not scaled from one frame: a light contact
-    is noisier, relatively, than a firm one, and its give is judged against its own noise),
+    must not raise its own reference; :func:`release_ratio`. The filtered activation's noise
+    is correlated from frame to frame, so it is measured over the window, not scaled from one
+    frame: a light contact is noisier, relatively, than a firm one, and its give is judged
+    against its own noise),
     while the footprint moves in one of those frames, in some view: at least
     ``release_confidence`` of it above the flow's noise level (the flow confidence), *or*
     its mean flow at least ``release_motion`` times the finger's own usual mean-flow
@@ -306,7 +307,7 @@ class SlipDetector:
         # contact begins with a press (the signed total: the real sensors' resting Σ |activation|
         # reaches 1.2 kΩ without a touch) and, while the robot is still, lasts while Σ |activation|
         # stays (a growing shear cancels the signed sum of a finger that still holds); while the
-        # robot moves (the hand opening its grasp) it ends with the signed total, as it begun
+        # robot moves (the hand opening its grasp) it ends with the signed total, as it began
         holding = not math.isnan(self._contact_since[f])
         if (contact if holding and still else total) < c.contact_kohm:
             self._contact_since[f] = np.nan
