@@ -76,6 +76,7 @@ def test_gitignore_covers_the_output_roots():
     ("tactile-analyze", ["run=x", "analysis.flow.methd=dis"], "did you mean `method`?"),
     ("tactile-analyze", [], "run: expected run=PATH"),
     ("tactile-analyze", ["-m", "run=glob(outputs/*/*)"], "glob() selects config options, not files"),
+    ("tactile-analyze", ["."], ".: a run is named by run=PATH; expected: tactile-analyze run=."),
     ("tactile-analyze", ["-m", "run=.", "hydra/launcher=joblib"], "run=.: no run.zarr found"),
     ("tactile-analyze", ["-m", "run=x/run.zarr", "batch=0"], "batch=0: expected the number of runs per job"),
     ("tactile-import", [], "source: missing; expected source=PATH"),
