@@ -438,18 +438,22 @@ def _bad(line: str) -> None:
     sys.exit(BAD_INPUT)
 
 
-def _refuse_glob(argv: list[str]) -> None:
-    """Hydra's ``glob(...)`` picks among a key's config options, not files: ``run=glob(...)``
-    would sweep over nothing and exit 0. Refuse it with the form that does what was meant."""
-    for arg in argv:
+def _refuse_misread_runs(argv: list[str]) -> None:
+    """Two ways of naming runs that Hydra would misread, refused with the form that does what
+    was meant: ``glob(...)`` picks among a key's config options, not files (``run=glob(...)``
+    would sweep over nothing and exit 0); a bare path (``tactile-analyze outputs/x``) is not an
+    override (Hydra's own message would not say ``run=``)."""
+    for before, arg in zip([""] + argv, argv):
         if arg.lstrip("+").startswith("run=glob("):
             pattern = arg.split("glob(", 1)[1].rstrip(")")
             _bad(f"{arg}: Hydra's glob() selects config options, not files; give the pattern itself: "
                  f"-m 'run={pattern}' (one job per run; batch=N for N runs per job)")
+        if "=" not in arg and not arg.startswith("-") and not before.startswith("-") and Path(arg).exists():
+            _bad(f"{arg}: a run is named by run=PATH; expected: tactile-analyze run={arg}")
 
 
 def main() -> None:
-    _refuse_glob(sys.argv[1:])
+    _refuse_misread_runs(sys.argv[1:])
     sys.argv[1:] = runs_as_jobs(sys.argv[1:])
     sys.exit(jobresults.run(_app))   # a config file is data: one line for a bad one, exit 2
 

@@ -24,7 +24,8 @@ def main() -> None:
 
 
 def answer_without_hydra(argv) -> None:
-    """``--help`` and ``--list`` (exit 0), or a bad ``hydra.searchpath`` with them (exit 2);
+    """``--help`` and ``--list`` (exit 0), or a bad ``hydra.searchpath`` with them (exit 2); a
+    bare config option (``tactile-run pour_grasp``) named as the override it stands for (exit 2);
     anything else returns."""
     listing_asked = "--list" in argv or argv[-1:] == ["list"]
     if wants_help(argv) or listing_asked:
@@ -39,3 +40,9 @@ def answer_without_hydra(argv) -> None:
             bad_input_and_exit(f"--list: takes no other argument than hydra.searchpath=[...]; got {' '.join(rest)}")
         from .listing import listing                # what there is to run, one line each
         print_and_exit(listing(CONF_DIR, searchpath))
+    for before, arg in zip([""] + list(argv), argv):
+        if "=" not in arg and not arg.startswith(("-", "~", "+")) and not before.startswith("-"):
+            groups = sorted(p.parent.name for p in CONF_DIR.glob(f"*/{arg}.yaml"))
+            if groups:
+                meant = " or ".join(f"{group}={arg}" for group in groups)
+                bad_input_and_exit(f"{arg}: expected key=value; did you mean {meant}?")

@@ -73,9 +73,11 @@ def test_gitignore_covers_the_output_roots():
 @pytest.mark.parametrize("name, args, words", [
     ("tactile-run", ["protocol=nope"], "protocol=nope"),
     ("tactile-run", ["protocol.sweep_sped=10"], "did you mean `sweep_speed`?"),
+    ("tactile-run", ["pour_grasp"], "pour_grasp: expected key=value; did you mean protocol=pour_grasp?"),
     ("tactile-analyze", ["run=x", "analysis.flow.methd=dis"], "did you mean `method`?"),
     ("tactile-analyze", [], "run: expected run=PATH"),
     ("tactile-analyze", ["-m", "run=glob(outputs/*/*)"], "glob() selects config options, not files"),
+    ("tactile-analyze", ["."], ".: a run is named by run=PATH; expected: tactile-analyze run=."),
     ("tactile-analyze", ["-m", "run=.", "hydra/launcher=joblib"], "run=.: no run.zarr found"),
     ("tactile-analyze", ["-m", "run=x/run.zarr", "batch=0"], "batch=0: expected the number of runs per job"),
     ("tactile-import", [], "source: missing; expected source=PATH"),
