@@ -332,3 +332,27 @@ def test_a_pulls_release_may_fall_from_just_below_its_high():
     twist = {**{k: v for k, v in pull.items() if k != "dated_by"}, "slip_frame": 58, "signal": "rotation"}
     _release(twist, raw, 10, 100.0, level(58) * stretch)
     assert twist.get("dated_by") != "release" or abs(twist["slip_frame"] - 65) > 3
+
+
+@pytest.mark.parametrize("n, offset", [(8, 0.0), (300, 0.0), (300, 1e4)])
+def test_the_knees_fits_from_prefix_sums_are_the_frame_by_frame_fits(n, offset):
+    """Every still → ramp → slope fit of the knee, read from prefix sums in O(1), is the fit made
+    frame by frame (SSE and coefficients), also on a signal far from zero."""
+    from tactile_flow.analysis.slip_onset import _fits, _fits_direct, _pairs
+    rng = np.random.default_rng(n)
+    t = np.arange(n)
+    y = offset + np.clip((t - 0.3 * n) / (0.2 * n), 0, 1) + rng.normal(0, 0.03, n)
+    a, b = _pairs(np.arange(0, n - 1), np.arange(0, n - 1), 2)
+    sse, coef = _fits(y, a, b)
+    sse_ref, coef_ref = _fits_direct(y, a, b)
+    assert np.allclose(sse, sse_ref, rtol=1e-6, atol=1e-9 * n)
+    assert np.allclose(coef, coef_ref, rtol=1e-6, atol=1e-4)      # the reference loses ~1e-5 far from 0
+
+
+def test_a_long_contacts_knee_is_where_its_ramp_ends():
+    """A 60 s contact at 100 Hz (6000 frames) that ramps from 20 s to 30 s: the knee at 30 s
+    within a few frames, its two-standard-error band around it."""
+    rng = np.random.default_rng(3)
+    t = np.arange(6000)
+    k = knee(np.clip((t - 2000) / 1000, 0, 1) + rng.normal(0, 0.03, len(t)))
+    assert abs(k.slip - 3000) <= 5 and k.wide_lo <= k.slip <= k.wide_hi and k.wide_hi - k.wide_lo <= 30
